@@ -1,0 +1,42 @@
+//! A contact sheet of a synthetic material: rows are views, columns are lights.
+//!
+//! Run: `cargo run --release --example contact_sheet -- stones 128 sheet.png`
+//! (arguments: material, tile size in texels, output PNG; defaults: stones 128 sheet.png).
+
+use btfmrf::btf::synthetic::SyntheticMaterial;
+use btfmrf::btf::{Btf, Direction, io};
+use ndarray::{Array3, s};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let material: SyntheticMaterial = args.first().map_or("stones", String::as_str).parse()?;
+    let size: u32 = args.get(1).map_or(Ok(128), |s| s.parse())?;
+    let out = args.get(2).map_or("sheet.png", String::as_str);
+
+    let btf = Btf::synthetic(material, size, 1)?;
+    // (theta, phi) of the views (rows) and lights (columns), all Bonn directions.
+    let views = [(0.0, 0.0), (45.0, 0.0), (75.0, 0.0)];
+    let lights = [
+        (0.0, 0.0),
+        (45.0, 0.0),
+        (45.0, 180.0),
+        (75.0, 90.0),
+        (75.0, 270.0),
+    ];
+    let find = |set: &btfmrf::btf::DirectionSet, (t, p): (f64, f64)| {
+        set.find(&Direction::new(t, p), 0.01)
+            .ok_or("not a Bonn direction")
+    };
+    let (n, gap) = (size as usize, 4);
+    let mut sheet = Array3::<f32>::ones((3, views.len() * (n + gap), lights.len() * (n + gap)));
+    for (r, &v) in views.iter().enumerate() {
+        for (c, &l) in lights.iter().enumerate() {
+            let image = btf.image(find(btf.views(), v)?, find(btf.lights(), l)?)?;
+            let (y, x) = (r * (n + gap), c * (n + gap));
+            sheet.slice_mut(s![.., y..y + n, x..x + n]).assign(&image);
+        }
+    }
+    io::write_image(std::path::Path::new(out), &sheet)?;
+    println!("{out}: rows = views {views:?}, columns = lights {lights:?}");
+    Ok(())
+}

@@ -1,0 +1,428 @@
+//! Single images: decoding PNG/JPEG (8-bit sRGB, linearised) and EXR (linear float) into planar
+//! `(3, h, w)` arrays, encoding them back, with size limits checked before any pixel is
+//! allocated.
+
+use std::io::Cursor;
+
+use exr::prelude::{self as exrp, ReadChannels, ReadLayers, WritableImage};
+use image::{ImageReader, Limits};
+use ndarray::Array3;
+
+use crate::btf::error::{BtfError, Result};
+use crate::color::{Srgb8Encoder, srgb_to_linear, srgb8_to_linear_table};
+
+/// The largest accepted image side, in pixels (a header claiming more is rejected unread).
+pub const MAX_SIDE: u32 = 16_384;
+
+/// How an image is stored in a file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImageFormat {
+    /// 8-bit sRGB JPEG (lossy; the Bonn database's format).
+    Jpeg {
+        /// Encoder quality, 1..=100.
+        quality: u8,
+    },
+    /// 8-bit sRGB PNG (lossless at 8 bits).
+    Png,
+    /// 32-bit float linear OpenEXR (lossless ZIP compression).
+    Exr,
+}
+
+impl ImageFormat {
+    /// The file extension without a dot.
+    pub fn extension(&self) -> &'static str {
+        match self {
+            ImageFormat::Jpeg { .. } => "jpg",
+            ImageFormat::Png => "png",
+            ImageFormat::Exr => "exr",
+        }
+    }
+
+    /// The format for a file name's extension (jpg/jpeg/png/exr, any case).
+    pub fn from_name(name: &str) -> Option<Self> {
+        let ext = name.rsplit_once('.')?.1.to_ascii_lowercase();
+        match ext.as_str() {
+            "jpg" | "jpeg" => Some(ImageFormat::Jpeg { quality: 90 }),
+            "png" => Some(ImageFormat::Png),
+            "exr" => Some(ImageFormat::Exr),
+            _ => None,
+        }
+    }
+}
+
+const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
+
+fn is_exr(bytes: &[u8]) -> bool {
+    bytes.starts_with(&EXR_MAGIC)
+}
+
+fn check_side(file: &str, width: u64, height: u64) -> Result<()> {
+    if width == 0 || height == 0 {
+        return Err(BtfError::image(
+            file,
+            "image has no pixels (0 width or height)",
+        ));
+    }
+    if width > u64::from(MAX_SIDE) || height > u64::from(MAX_SIDE) {
+        return Err(BtfError::TooLarge {
+            file: file.to_string(),
+            width,
+            height,
+            limit: MAX_SIDE,
+        });
+    }
+    Ok(())
+}
+
+fn reader<'a>(bytes: &'a [u8], file: &str) -> Result<ImageReader<Cursor<&'a [u8]>>> {
+    let mut reader = ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| BtfError::image(file, e))?;
+    if reader.format().is_none() {
+        return Err(BtfError::image(
+            file,
+            "not a PNG, JPEG or EXR image (unknown signature)",
+        ));
+    }
+    let mut limits = Limits::default();
+    limits.max_image_width = Some(MAX_SIDE);
+    limits.max_image_height = Some(MAX_SIDE);
+    limits.max_alloc = Some(4 * u64::from(MAX_SIDE) * u64::from(MAX_SIDE) * 4);
+    reader.limits(limits);
+    Ok(reader)
+}
+
+/// Width and height from an image's header, without decoding pixels. `bytes` may be just the
+/// start of the file, as long as it holds the header.
+///
+/// # Errors
+/// An unknown or corrupt header, or a size of zero or beyond [`MAX_SIDE`].
+pub fn probe_size(bytes: &[u8], file: &str) -> Result<(u32, u32)> {
+    let (w, h) = if is_exr(bytes) {
+        let meta = exrp::MetaData::read_from_buffered(Cursor::new(bytes), false)
+            .map_err(|e| BtfError::image(file, format!("corrupt EXR header ({e})")))?;
+        let header = meta
+            .headers
+            .first()
+            .ok_or_else(|| BtfError::image(file, "EXR file without a layer"))?;
+        (
+            header.layer_size.width() as u64,
+            header.layer_size.height() as u64,
+        )
+    } else {
+        // Our own header check first: the image crate's limit error does not say the size.
+        let (w, h) = reader(bytes, file)?
+            .into_dimensions()
+            .map_err(|e| header_error(file, e))?;
+        (u64::from(w), u64::from(h))
+    };
+    check_side(file, w, h)?;
+    Ok((w as u32, h as u32))
+}
+
+fn header_error(file: &str, e: image::ImageError) -> BtfError {
+    match e {
+        image::ImageError::Limits(_) => BtfError::image(
+            file,
+            format!("image header claims a size beyond the {MAX_SIDE}x{MAX_SIDE} limit"),
+        ),
+        other => BtfError::image(file, format!("corrupt image ({other})")),
+    }
+}
+
+/// Decodes a whole PNG, JPEG or EXR file into planar `(3, h, w)` linear RGB.
+///
+/// 8- and 16-bit images are sRGB-encoded and are linearised; grey images are replicated to
+/// three channels; alpha is dropped. EXR samples must be finite.
+///
+/// # Errors
+/// Corrupt data, oversized images, non-finite EXR samples; the message names `file`.
+pub fn decode(bytes: &[u8], file: &str) -> Result<Array3<f32>> {
+    if is_exr(bytes) {
+        return decode_exr(bytes, file);
+    }
+    // Size check on the header before the decoder allocates anything.
+    probe_size(bytes, file)?;
+    let img = reader(bytes, file)?
+        .decode()
+        .map_err(|e| BtfError::image(file, format!("corrupt image data ({e})")))?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let mut out = Array3::<f32>::zeros((3, h, w));
+    let deep = matches!(
+        img.color(),
+        image::ColorType::L16
+            | image::ColorType::La16
+            | image::ColorType::Rgb16
+            | image::ColorType::Rgba16
+    );
+    let float = matches!(
+        img.color(),
+        image::ColorType::Rgb32F | image::ColorType::Rgba32F
+    );
+    if float {
+        let rgb = img.to_rgb32f();
+        for (x, y, p) in rgb.enumerate_pixels() {
+            for c in 0..3 {
+                out[[c, y as usize, x as usize]] = p[c];
+            }
+        }
+        check_finite(&out, file)?;
+    } else if deep {
+        let rgb = img.to_rgb16();
+        for (x, y, p) in rgb.enumerate_pixels() {
+            for c in 0..3 {
+                out[[c, y as usize, x as usize]] = srgb_to_linear(f32::from(p[c]) / 65535.0);
+            }
+        }
+    } else {
+        let lut = srgb8_to_linear_table();
+        let rgb = img.to_rgb8();
+        for (x, y, p) in rgb.enumerate_pixels() {
+            for c in 0..3 {
+                out[[c, y as usize, x as usize]] = lut[p[c] as usize];
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn decode_exr(bytes: &[u8], file: &str) -> Result<Array3<f32>> {
+    probe_size(bytes, file)?;
+    let image = exrp::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(Cursor::new(bytes))
+        .map_err(|e| BtfError::image(file, format!("corrupt EXR ({e})")))?;
+    let layer = &image.layer_data;
+    let (w, h) = (layer.size.width(), layer.size.height());
+    let find = |names: &[&str]| {
+        layer.channel_data.list.iter().find(|ch| {
+            let n = ch.name.to_string();
+            let last = n.rsplit('.').next().unwrap_or(&n).to_ascii_uppercase();
+            names.contains(&last.as_str())
+        })
+    };
+    let channels = match (find(&["R"]), find(&["G"]), find(&["B"]), find(&["Y"])) {
+        (Some(r), Some(g), Some(b), _) => [r, g, b],
+        (_, _, _, Some(y)) => [y, y, y],
+        _ => {
+            return Err(BtfError::image(
+                file,
+                "EXR has neither R, G, B nor Y channels",
+            ));
+        }
+    };
+    let mut out = Array3::<f32>::zeros((3, h, w));
+    for (c, ch) in channels.iter().enumerate() {
+        if ch.sample_data.len() != w * h {
+            return Err(BtfError::image(
+                file,
+                "EXR channel is subsampled (unsupported)",
+            ));
+        }
+        for (dst, v) in out
+            .index_axis_mut(ndarray::Axis(0), c)
+            .iter_mut()
+            .zip(ch.sample_data.values_as_f32())
+        {
+            *dst = v;
+        }
+    }
+    check_finite(&out, file)?;
+    Ok(out)
+}
+
+/// Fails with [`BtfError::NonFinite`] if any sample of a `(c, h, w)` image is NaN or infinite.
+pub fn check_finite(image: &Array3<f32>, file: &str) -> Result<()> {
+    let mut count = 0usize;
+    let mut first = None;
+    for ((_, y, x), v) in image.indexed_iter() {
+        if !v.is_finite() {
+            count += 1;
+            first.get_or_insert((x, y));
+        }
+    }
+    match first {
+        None => Ok(()),
+        Some((x, y)) => Err(BtfError::NonFinite {
+            file: file.to_string(),
+            count,
+            x,
+            y,
+        }),
+    }
+}
+
+/// Encodes planar `(3, h, w)` linear RGB into file bytes of the given format (8-bit formats are
+/// sRGB-encoded and clipped to [0, 1]).
+///
+/// # Errors
+/// A wrong shape, or the encoder fails.
+pub fn encode(image: &Array3<f32>, format: ImageFormat, file: &str) -> Result<Vec<u8>> {
+    let (c, h, w) = image.dim();
+    if c != 3 || h == 0 || w == 0 {
+        return Err(BtfError::image(
+            file,
+            format!("cannot encode an image of shape {:?}", image.dim()),
+        ));
+    }
+    match format {
+        ImageFormat::Exr => {
+            let planes: Vec<(&str, Vec<f32>)> = ["R", "G", "B"]
+                .iter()
+                .enumerate()
+                .map(|(c, n)| {
+                    (
+                        *n,
+                        image
+                            .index_axis(ndarray::Axis(0), c)
+                            .iter()
+                            .copied()
+                            .collect(),
+                    )
+                })
+                .collect();
+            encode_exr_channels(w, h, planes, file)
+        }
+        ImageFormat::Jpeg { .. } | ImageFormat::Png => {
+            let enc = Srgb8Encoder::new();
+            let mut rgb = vec![0u8; w * h * 3];
+            for ((ch, y, x), v) in image.indexed_iter() {
+                rgb[(y * w + x) * 3 + ch] = enc.encode(*v);
+            }
+            encode_rgb8(&rgb, w as u32, h as u32, format, file)
+        }
+    }
+}
+
+/// Encodes interleaved 8-bit sRGB pixels (`w * h * 3` bytes) as JPEG or PNG.
+///
+/// # Errors
+/// EXR requested (use [`encode`]) or the encoder fails.
+pub fn encode_rgb8(rgb: &[u8], w: u32, h: u32, format: ImageFormat, file: &str) -> Result<Vec<u8>> {
+    use image::ImageEncoder;
+    let mut buf = Vec::new();
+    let result = match format {
+        ImageFormat::Jpeg { quality } => {
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut buf, quality.clamp(1, 100))
+                .write_image(rgb, w, h, image::ExtendedColorType::Rgb8)
+        }
+        ImageFormat::Png => image::codecs::png::PngEncoder::new(&mut buf).write_image(
+            rgb,
+            w,
+            h,
+            image::ExtendedColorType::Rgb8,
+        ),
+        ImageFormat::Exr => {
+            return Err(BtfError::image(
+                file,
+                "8-bit pixels cannot be written as EXR",
+            ));
+        }
+    };
+    result.map_err(|e| BtfError::image(file, format!("cannot encode ({e})")))?;
+    Ok(buf)
+}
+
+/// Encodes named float planes (each `w * h` samples, row-major) as one EXR layer.
+///
+/// # Errors
+/// A plane of the wrong length, or the encoder fails.
+pub fn encode_exr_channels(
+    w: usize,
+    h: usize,
+    planes: Vec<(&str, Vec<f32>)>,
+    file: &str,
+) -> Result<Vec<u8>> {
+    if let Some((name, _)) = planes.iter().find(|(_, p)| p.len() != w * h) {
+        return Err(BtfError::image(
+            file,
+            format!("channel {name} has the wrong length"),
+        ));
+    }
+    let channels: exrp::SmallVec<[exrp::AnyChannel<exrp::FlatSamples>; 4]> = planes
+        .into_iter()
+        .map(|(name, data)| exrp::AnyChannel::new(name, exrp::FlatSamples::F32(data)))
+        .collect();
+    let layer = exrp::Layer::new(
+        (w, h),
+        exrp::LayerAttributes::default(),
+        exrp::Encoding::SMALL_LOSSLESS,
+        exrp::AnyChannels::sort(channels),
+    );
+    let mut buf = Cursor::new(Vec::new());
+    exrp::Image::from_layer(layer)
+        .write()
+        .to_buffered(&mut buf)
+        .map_err(|e| BtfError::image(file, format!("cannot encode EXR ({e})")))?;
+    Ok(buf.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn gradient(h: usize, w: usize) -> Array3<f32> {
+        Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+            (x as f32 / w as f32) * 0.8 + c as f32 * 0.05 + y as f32 * 0.001
+        })
+    }
+
+    #[test]
+    fn png_round_trip_is_within_8_bit_quantisation() {
+        let im = gradient(9, 13);
+        let bytes = encode(&im, ImageFormat::Png, "t.png").unwrap();
+        assert_eq!(probe_size(&bytes, "t.png").unwrap(), (13, 9));
+        let back = decode(&bytes, "t.png").unwrap();
+        for (a, b) in im.iter().zip(back.iter()) {
+            // Half an 8-bit sRGB code is at most 0.0045 in linear light (at the top end).
+            assert!((a - b).abs() < 0.0045, "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn exr_round_trip_is_exact() {
+        let im = gradient(7, 5);
+        let bytes = encode(&im, ImageFormat::Exr, "t.exr").unwrap();
+        assert_eq!(
+            probe_size(&bytes[..bytes.len().min(4096)], "t.exr").unwrap(),
+            (5, 7)
+        );
+        assert_eq!(decode(&bytes, "t.exr").unwrap(), im);
+    }
+
+    #[test]
+    fn jpeg_round_trip_is_close() {
+        let im = gradient(16, 16);
+        let bytes = encode(&im, ImageFormat::Jpeg { quality: 95 }, "t.jpg").unwrap();
+        let back = decode(&bytes, "t.jpg").unwrap();
+        let mean_err: f32 = im
+            .iter()
+            .zip(back.iter())
+            .map(|(a, b)| (a - b).abs())
+            .sum::<f32>()
+            / im.len() as f32;
+        assert!(mean_err < 0.01, "{mean_err}");
+    }
+
+    #[test]
+    fn garbage_is_an_error_not_a_panic() {
+        assert!(decode(b"definitely not an image", "x.jpg").is_err());
+        assert!(decode(&EXR_MAGIC, "x.exr").is_err());
+        assert!(decode(&[], "x.png").is_err());
+        assert!(probe_size(&[0xff, 0xd8, 0xff], "x.jpg").is_err());
+    }
+
+    #[test]
+    fn format_from_name() {
+        assert_eq!(
+            ImageFormat::from_name("a/B.JPEG"),
+            Some(ImageFormat::Jpeg { quality: 90 })
+        );
+        assert_eq!(ImageFormat::from_name("x.exr"), Some(ImageFormat::Exr));
+        assert_eq!(ImageFormat::from_name("dirs.lp"), None);
+    }
+}
