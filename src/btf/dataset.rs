@@ -70,15 +70,7 @@ impl Btf {
     /// # Errors
     /// `size` outside the accepted range.
     pub fn synthetic(material: SyntheticMaterial, size: u32, seed: u64) -> Result<Self> {
-        let source = SyntheticBtf::new(material, size, seed)?;
-        Self::from_source(
-            format!("synthetic {} ({size}x{size}, seed {seed})", material.name()),
-            DirectionSet::bonn(),
-            DirectionSet::bonn(),
-            size,
-            size,
-            Box::new(source),
-        )
+        Ok(SyntheticBtf::new(material, size, seed)?.into_btf())
     }
 
     /// A BTF over any image source.

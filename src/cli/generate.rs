@@ -4,8 +4,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
+use btfmrf::btf::io;
 use btfmrf::btf::synthetic::{SyntheticBtf, SyntheticMaterial};
-use btfmrf::btf::{Btf, DirectionSet, io};
 
 use super::{Bar, Global, OutputFormat, emit, human_bytes};
 
@@ -51,14 +51,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             .write(dir)
             .context("writing the ground truth")?;
     }
-    let btf = Btf::from_source(
-        format!("synthetic {}", args.material),
-        DirectionSet::bonn(),
-        DirectionSet::bonn(),
-        args.size,
-        args.size,
-        Box::new(source),
-    )?;
+    let btf = source.into_btf();
     let bar = Bar::new(global);
     io::write_ubo2003(&btf, &args.out, args.format.image_format(), &bar)?;
     let seconds = start.elapsed().as_secs_f64();

@@ -74,7 +74,9 @@ fn check_side(file: &str, width: u64, height: u64) -> Result<()> {
     Ok(())
 }
 
-fn reader<'a>(bytes: &'a [u8], file: &str) -> Result<ImageReader<Cursor<&'a [u8]>>> {
+/// A format-sniffing reader; `limited` adds the decoder's own allocation limits (the header
+/// probe runs without them so that it can report the size it found).
+fn reader<'a>(bytes: &'a [u8], file: &str, limited: bool) -> Result<ImageReader<Cursor<&'a [u8]>>> {
     let mut reader = ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| BtfError::image(file, e))?;
@@ -84,11 +86,15 @@ fn reader<'a>(bytes: &'a [u8], file: &str) -> Result<ImageReader<Cursor<&'a [u8]
             "not a PNG, JPEG or EXR image (unknown signature)",
         ));
     }
-    let mut limits = Limits::default();
-    limits.max_image_width = Some(MAX_SIDE);
-    limits.max_image_height = Some(MAX_SIDE);
-    limits.max_alloc = Some(4 * u64::from(MAX_SIDE) * u64::from(MAX_SIDE) * 4);
-    reader.limits(limits);
+    if limited {
+        let mut limits = Limits::default();
+        limits.max_image_width = Some(MAX_SIDE);
+        limits.max_image_height = Some(MAX_SIDE);
+        limits.max_alloc = Some(4 * u64::from(MAX_SIDE) * u64::from(MAX_SIDE) * 4);
+        reader.limits(limits);
+    } else {
+        reader.no_limits();
+    }
     Ok(reader)
 }
 
@@ -110,8 +116,8 @@ pub fn probe_size(bytes: &[u8], file: &str) -> Result<(u32, u32)> {
             header.layer_size.height() as u64,
         )
     } else {
-        // Our own header check first: the image crate's limit error does not say the size.
-        let (w, h) = reader(bytes, file)?
+        // Header only: no pixel memory is touched here, and check_side below says the size.
+        let (w, h) = reader(bytes, file, false)?
             .into_dimensions()
             .map_err(|e| header_error(file, e))?;
         (u64::from(w), u64::from(h))
@@ -143,7 +149,8 @@ pub fn decode(bytes: &[u8], file: &str) -> Result<Array3<f32>> {
     }
     // Size check on the header before the decoder allocates anything.
     probe_size(bytes, file)?;
-    let img = reader(bytes, file)?
+    check_jpeg_complete(bytes, file)?;
+    let img = reader(bytes, file, true)?
         .decode()
         .map_err(|e| BtfError::image(file, format!("corrupt image data ({e})")))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
@@ -184,6 +191,27 @@ pub fn decode(bytes: &[u8], file: &str) -> Result<Array3<f32>> {
         }
     }
     Ok(out)
+}
+
+/// JPEG decoders fill a truncated scan with grey and report success; we refuse it instead.
+/// In entropy-coded data 0xFF is always followed by 0x00 or a restart marker, so an
+/// end-of-image marker (FF D9) after the last start-of-scan (FF DA) means the file is whole.
+fn check_jpeg_complete(bytes: &[u8], file: &str) -> Result<()> {
+    if !bytes.starts_with(&[0xff, 0xd8]) {
+        return Ok(());
+    }
+    let last_scan = bytes
+        .windows(2)
+        .rposition(|w| w == [0xff, 0xda])
+        .unwrap_or(0);
+    if bytes[last_scan..].windows(2).any(|w| w == [0xff, 0xd9]) {
+        Ok(())
+    } else {
+        Err(BtfError::image(
+            file,
+            "truncated JPEG (no end-of-image marker after the image data)",
+        ))
+    }
 }
 
 fn decode_exr(bytes: &[u8], file: &str) -> Result<Array3<f32>> {
@@ -237,12 +265,17 @@ fn decode_exr(bytes: &[u8], file: &str) -> Result<Array3<f32>> {
 
 /// Fails with [`BtfError::NonFinite`] if any sample of a `(c, h, w)` image is NaN or infinite.
 pub fn check_finite(image: &Array3<f32>, file: &str) -> Result<()> {
+    let (channels, h, w) = image.dim();
     let mut count = 0usize;
     let mut first = None;
-    for ((_, y, x), v) in image.indexed_iter() {
-        if !v.is_finite() {
-            count += 1;
-            first.get_or_insert((x, y));
+    for y in 0..h {
+        for x in 0..w {
+            for c in 0..channels {
+                if !image[[c, y, x]].is_finite() {
+                    count += 1;
+                    first.get_or_insert((x, y));
+                }
+            }
         }
     }
     match first {

@@ -203,10 +203,48 @@ pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 /// deleted if dropped before being persisted.
 pub(crate) fn temp_file_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
     let parent = parent_dir(path);
-    tempfile::Builder::new()
-        .prefix(".btfmrf-partial-")
+    partial_builder(0o644)
         .tempfile_in(parent)
         .map_err(|e| BtfError::io(parent, e))
+}
+
+/// A temporary folder next to `path`, deleted if dropped; [`publish_dir`] gives it its name.
+pub(crate) fn temp_dir_beside(path: &Path) -> Result<tempfile::TempDir> {
+    if path.exists() {
+        return Err(BtfError::io(
+            path,
+            std::io::Error::new(
+                std::io::ErrorKind::AlreadyExists,
+                "already exists; remove it or choose another name",
+            ),
+        ));
+    }
+    let parent = parent_dir(path);
+    partial_builder(0o755)
+        .tempdir_in(parent)
+        .map_err(|e| BtfError::io(parent, e))
+}
+
+/// Renames a completed temporary folder to `path` (removing it if that fails).
+pub(crate) fn publish_dir(tmp: tempfile::TempDir, path: &Path) -> Result<()> {
+    let kept = tmp.keep();
+    std::fs::rename(&kept, path).map_err(|e| {
+        let _ = std::fs::remove_dir_all(&kept);
+        BtfError::io(path, e)
+    })
+}
+
+/// Temporary names start with `.btfmrf-partial-`; finished outputs get ordinary permissions
+/// (the temporary-file default, owner-only, would surprise users).
+fn partial_builder(#[allow(unused_variables)] mode: u32) -> tempfile::Builder<'static, 'static> {
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".btfmrf-partial-");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(mode));
+    }
+    builder
 }
 
 /// The folder holding `path` ("." for a bare file name).

@@ -193,22 +193,24 @@ pub(crate) fn open(container: Container) -> Result<Btf> {
     Btf::from_source(location, views, lights, width, height, Box::new(source))
 }
 
-/// The view and light sets: the Bonn sets when every direction found is a Bonn direction (so a
-/// missing image is reported as missing), otherwise the directions found, sorted by theta, phi.
+/// The view and light sets: the Bonn sets when the directions found are Bonn directions and
+/// cover most of them (so a missing image is reported as missing rather than shrinking the
+/// set), otherwise exactly the directions found, sorted by theta, then phi.
 fn direction_sets(
     entries: &[(String, UboAngles)],
     location: &str,
 ) -> Result<(DirectionSet, DirectionSet)> {
     let bonn = DirectionSet::bonn();
     let pick = |dirs: Vec<Direction>| -> Result<DirectionSet> {
-        if dirs.iter().all(|d| bonn.find(d, 1e-6).is_some()) {
-            return Ok(bonn.clone());
-        }
         let mut unique: Vec<Direction> = Vec::new();
         for d in dirs {
             if !unique.iter().any(|u| u.angle_to(&d) < 1e-6) {
                 unique.push(d);
             }
+        }
+        let all_bonn = unique.iter().all(|d| bonn.find(d, 1e-6).is_some());
+        if all_bonn && 2 * unique.len() > bonn.len() {
+            return Ok(bonn.clone());
         }
         unique.sort_by(|a, b| {
             (a.theta_deg, a.phi_deg)
@@ -387,29 +389,12 @@ fn write_folder(
     format: ImageFormat,
     progress: &dyn Progress,
 ) -> Result<()> {
-    if out.exists() {
-        return Err(BtfError::io(
-            out,
-            std::io::Error::new(
-                std::io::ErrorKind::AlreadyExists,
-                "already exists; remove it or choose another name",
-            ),
-        ));
-    }
-    let parent = super::parent_dir(out);
-    let tmp = tempfile::Builder::new()
-        .prefix(".btfmrf-partial-")
-        .tempdir_in(parent)
-        .map_err(|e| BtfError::io(parent, e))?;
+    let tmp = super::temp_dir_beside(out)?;
     encode_in_order(btf, names, lights, format, progress, |name, bytes| {
         let path = tmp.path().join(name);
         std::fs::write(&path, bytes).map_err(|e| BtfError::io(&path, e))
     })?;
-    let tmp_path = tmp.keep();
-    std::fs::rename(&tmp_path, out).map_err(|e| {
-        let _ = std::fs::remove_dir_all(&tmp_path);
-        BtfError::io(out, e)
-    })
+    super::publish_dir(tmp, out)
 }
 
 #[cfg(test)]

@@ -19,7 +19,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use ndarray::{Array2, Array3};
 
-use super::dataset::ImageSource;
+use super::dataset::{Btf, ImageSource};
 use super::directions::DirectionSet;
 use super::error::{BtfError, Result};
 use super::io::{self, image::encode_exr_channels};
@@ -134,12 +134,6 @@ impl GroundTruth {
     /// # Errors
     /// `dir` exists already, or cannot be written.
     pub fn write(&self, dir: &Path) -> Result<()> {
-        if dir.exists() {
-            return Err(BtfError::io(
-                dir,
-                std::io::Error::new(std::io::ErrorKind::AlreadyExists, "already exists"),
-            ));
-        }
         let (h, w) = self.height.dim();
         let flat = |a: ndarray::ArrayView2<f32>| a.iter().copied().collect::<Vec<f32>>();
         let rgb = |a: &Array3<f32>| -> Vec<NamedPlane> {
@@ -156,21 +150,13 @@ impl GroundTruth {
             ("specular.exr", vec![("Y", flat(self.specular.view()))]),
             ("shininess.exr", vec![("Y", flat(self.shininess.view()))]),
         ];
-        let parent = io::parent_dir(dir);
-        let tmp = tempfile::Builder::new()
-            .prefix(".btfmrf-partial-")
-            .tempdir_in(parent)
-            .map_err(|e| BtfError::io(parent, e))?;
+        let tmp = io::temp_dir_beside(dir)?;
         for (name, planes) in files {
             let path = tmp.path().join(name);
             let bytes = encode_exr_channels(w, h, planes, &path.display().to_string())?;
             std::fs::write(&path, bytes).map_err(|e| BtfError::io(&path, e))?;
         }
-        let kept = tmp.keep();
-        std::fs::rename(&kept, dir).map_err(|e| {
-            let _ = std::fs::remove_dir_all(&kept);
-            BtfError::io(dir, e)
-        })
+        io::publish_dir(tmp, dir)
     }
 }
 
@@ -183,6 +169,9 @@ const VIEW_CACHE: usize = 6;
 /// A procedural material as an [`ImageSource`] (use [`super::Btf::synthetic`] for the usual
 /// Bonn sampling).
 pub struct SyntheticBtf {
+    label: String,
+    view_set: DirectionSet,
+    light_set: DirectionSet,
     surface: Surface,
     views: Vec<[f32; 3]>,
     lights: Vec<[f32; 3]>,
@@ -228,12 +217,27 @@ impl SyntheticBtf {
         }
         let surface = Surface::sample(material.pattern(seed).as_ref(), size as usize);
         Ok(Self {
+            label: format!("synthetic {material} ({size}x{size}, seed {seed})"),
+            view_set: views.clone(),
+            light_set: lights.clone(),
             surface,
             views: unit_vectors(views),
             lights: unit_vectors(lights),
             shadows: (0..lights.len()).map(|_| OnceLock::new()).collect(),
             view_cache: Mutex::new(VecDeque::new()),
         })
+    }
+
+    /// The material as a [`Btf`] (images rendered on demand).
+    pub fn into_btf(self) -> Btf {
+        let n = self.surface.n as u32;
+        let (label, views, lights) = (
+            self.label.clone(),
+            self.view_set.clone(),
+            self.light_set.clone(),
+        );
+        Btf::from_source(label, views, lights, n, n, Box::new(self))
+            .expect("a synthetic tile has at least MIN_SIZE texels")
     }
 
     /// The height field, normals and BRDF maps the images are rendered from.

@@ -1,0 +1,179 @@
+//! The command line as a user drives it: generate, info, convert.
+
+mod common;
+
+use common::*;
+
+#[test]
+fn generate_writes_6561_bonn_named_jpegs_that_an_independent_reader_opens() {
+    let dir = temp();
+    let zip = dir.path().join("s.zip");
+    let out = ok(&[
+        "generate",
+        "sponge",
+        "--size",
+        "32",
+        "--out",
+        s(&zip),
+        "--json",
+    ]);
+    let report: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(report["images"], 6561);
+
+    // Read it back the way the btf-extractor package (Python) does: the angles sit at fixed
+    // offsets from the end of each name ending in ".jpg"; decode with the image crate
+    // directly, not through our reader.
+    let members = read_zip(&zip);
+    assert_eq!(members.len(), 6561);
+    let mut angles = std::collections::HashSet::new();
+    for (name, bytes) in &members {
+        assert!(name.ends_with(".jpg"), "{name}");
+        let n = name.len();
+        let field = |a: usize, b: usize| name[n - a..n - b].parse::<u32>().unwrap();
+        let key = (field(25, 22), field(19, 16), field(13, 10), field(7, 4));
+        assert!(angles.insert(key), "duplicate {key:?}");
+        assert!([0, 15, 30, 45, 60, 75].contains(&key.0) && key.1 < 360);
+        let img = image::load_from_memory(bytes).unwrap();
+        assert_eq!((img.width(), img.height()), (32, 32));
+    }
+    assert_eq!(angles.len(), 6561);
+
+    let info: serde_json::Value = serde_json::from_str(&ok(&["info", s(&zip), "--json"])).unwrap();
+    assert_eq!(info["views"], 81);
+    assert_eq!(info["lights"], 81);
+    assert_eq!(info["width"], 32);
+    assert_eq!(info["height"], 32);
+    assert_eq!(info["images"], 6561);
+    assert_eq!(info["raw_bytes"], 6561 * 32 * 32 * 3);
+}
+
+#[test]
+fn generate_is_deterministic_in_its_seed() {
+    let dir = temp();
+    let run = |name: &str, seed: &str| {
+        let p = dir.path().join(name);
+        ok(&[
+            "generate",
+            "leather",
+            "--size",
+            "8",
+            "--seed",
+            seed,
+            "--out",
+            s(&p),
+            "--format",
+            "png",
+        ]);
+        std::fs::read(p).unwrap()
+    };
+    let (a, b, c) = (run("a.zip", "5"), run("b.zip", "5"), run("c.zip", "6"));
+    assert_eq!(a, b, "same seed, same bytes");
+    assert_ne!(a, c, "another seed, another material");
+}
+
+#[test]
+fn generate_exports_the_ground_truth() {
+    let dir = temp();
+    let truth = dir.path().join("truth");
+    ok(&[
+        "generate",
+        "stones",
+        "--size",
+        "16",
+        "--out",
+        s(&dir.path().join("x.zip")),
+        "--truth",
+        s(&truth),
+    ]);
+    let names = entries(&truth);
+    for f in [
+        "albedo.exr",
+        "height.exr",
+        "normals.exr",
+        "shininess.exr",
+        "specular.exr",
+    ] {
+        assert!(names.contains(&f.to_string()), "{names:?}");
+    }
+    let normals = btfmrf::btf::io::read_image(&truth.join("normals.exr")).unwrap();
+    assert_eq!(normals.dim(), (3, 16, 16));
+    assert!(
+        normals
+            .index_axis(ndarray::Axis(0), 2)
+            .iter()
+            .all(|&z| z > 0.0)
+    );
+    let height = btfmrf::btf::io::read_image(&truth.join("height.exr")).unwrap();
+    let max = height.iter().copied().fold(0.0f32, f32::max);
+    assert!(
+        (max - 0.09 * 16.0).abs() < 1e-3,
+        "stones relief is 9% of the tile: {max}"
+    );
+}
+
+#[test]
+fn info_reads_the_real_rti_sets() {
+    for (set, lights, w, h) in [("clay-leaf", 48, 310, 310), ("loewenkopf", 240, 64, 43)] {
+        let path = format!("../shared/data/rti/{set}");
+        let info: serde_json::Value =
+            serde_json::from_str(&ok(&["info", &path, "--json"])).unwrap();
+        assert_eq!(info["views"], 1, "{set}");
+        assert_eq!(info["lights"], lights, "{set}");
+        assert_eq!(
+            (info["width"].clone(), info["height"].clone()),
+            (w.into(), h.into())
+        );
+    }
+    let human = ok(&["info", "../shared/data/rti/clay-leaf"]);
+    assert!(human.contains("lights: 48"), "{human}");
+}
+
+#[test]
+fn convert_between_zip_folder_exr_and_png() {
+    let dir = temp();
+    let zip = tiny_btf(&dir.path().join("a.zip"), 8, btfmrf::btf::ImageFormat::Png);
+    let exr = dir.path().join("a-exr");
+    ok(&[
+        "convert",
+        s(&zip),
+        "--out",
+        s(&exr),
+        "--format",
+        "exr",
+        "--quiet",
+    ]);
+    let names = entries(&exr);
+    assert_eq!(names.len(), 6561);
+    assert!(names.iter().all(|n| n.ends_with(".exr")));
+    let back = dir.path().join("b.zip");
+    ok(&["convert", s(&exr), "--out", s(&back), "--format", "png"]);
+    // PNG -> EXR -> PNG is lossless at 8 bits.
+    let (a, b) = (read_zip(&zip), read_zip(&back));
+    let decode = |bytes: &[u8]| image::load_from_memory(bytes).unwrap().to_rgb8().into_raw();
+    for ((na, ba), (nb, bb)) in a.iter().zip(&b) {
+        assert_eq!(na, nb);
+        assert_eq!(decode(ba), decode(bb), "{na}");
+    }
+    // The RTI set's light angles are not whole degrees: the UBO2003 names cannot hold them.
+    let err = fails(&[
+        "convert",
+        "../shared/data/rti/clay-leaf",
+        "--out",
+        s(&dir.path().join("r.zip")),
+    ]);
+    assert!(err.contains("whole degrees"), "{err}");
+}
+
+#[test]
+fn help_teaches() {
+    let top = ok(&["--help"]);
+    for word in ["generate", "info", "convert", "Examples"] {
+        assert!(top.contains(word), "{top}");
+    }
+    let generate = ok(&["generate", "--help"]);
+    for word in [
+        "sponge", "knit", "stones", "leather", "--seed", "--truth", "Example",
+    ] {
+        assert!(generate.contains(word), "{generate}");
+    }
+}

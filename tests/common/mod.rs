@@ -1,0 +1,96 @@
+//! Helpers shared by the integration tests: running the real binary, temporary folders, and
+//! small BTF archives that tests can then damage on purpose.
+#![allow(dead_code)] // each test binary uses a different subset
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use btfmrf::btf::synthetic::SyntheticMaterial;
+use btfmrf::btf::{Btf, ImageFormat, io};
+use btfmrf::progress::NoProgress;
+
+/// The real `btfmrf` binary built for these tests.
+pub fn btfmrf(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_btfmrf"))
+        .args(args)
+        .output()
+        .expect("the btfmrf binary runs")
+}
+
+/// Stdout of a run that must succeed.
+pub fn ok(args: &[&str]) -> String {
+    let out = btfmrf(args);
+    assert!(
+        out.status.success(),
+        "btfmrf {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("utf-8 output")
+}
+
+/// Stderr of a run that must fail cleanly: non-zero exit, one `error:` line, no panic.
+pub fn fails(args: &[&str]) -> String {
+    let out = btfmrf(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "btfmrf {args:?} should fail");
+    assert!(
+        !stderr.contains("panicked"),
+        "btfmrf {args:?} panicked:\n{stderr}"
+    );
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "expected one error line, got:\n{stderr}");
+    errors[0].to_string()
+}
+
+/// A fresh temporary folder, removed when dropped.
+pub fn temp() -> tempfile::TempDir {
+    tempfile::tempdir().expect("temporary folder")
+}
+
+/// The path as &str (test paths are UTF-8).
+pub fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+/// Writes a tiny synthetic Bonn BTF (81 x 81 images of `size`^2) to `path` (zip or folder).
+pub fn tiny_btf(path: &Path, size: u32, format: ImageFormat) -> PathBuf {
+    let btf = Btf::synthetic(SyntheticMaterial::Knit, size, 3).expect("synthetic BTF");
+    io::write_ubo2003(&btf, path, format, &NoProgress).expect("written");
+    path.to_path_buf()
+}
+
+/// All members of a zip archive, in order.
+pub fn read_zip(path: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut archive = zip::ZipArchive::new(std::fs::File::open(path).unwrap()).unwrap();
+    (0..archive.len())
+        .map(|i| {
+            let mut f = archive.by_index(i).unwrap();
+            let mut bytes = Vec::new();
+            f.read_to_end(&mut bytes).unwrap();
+            (f.name().unwrap().into_owned(), bytes)
+        })
+        .collect()
+}
+
+/// Writes members into a new zip archive.
+pub fn write_zip(path: &Path, members: &[(String, Vec<u8>)]) {
+    let mut zip = zip::ZipWriter::new(std::fs::File::create(path).unwrap());
+    let options =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    for (name, bytes) in members {
+        zip.start_file(name.as_str(), options).unwrap();
+        zip.write_all(bytes).unwrap();
+    }
+    zip.finish().unwrap();
+}
+
+/// Files (not folders) directly inside `dir`, hidden ones included.
+pub fn entries(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
