@@ -23,6 +23,10 @@ pub use ubo2003::write_ubo2003;
 /// The largest file this library reads into memory at once (an image or a `.lp` file).
 pub const MAX_FILE_BYTES: u64 = 1 << 30;
 
+/// Memory reserved up front for a read: sizes declared in headers are not trusted beyond it
+/// (a larger file grows the buffer as real bytes arrive).
+const MAX_RESERVE: u64 = 64 << 20;
+
 /// Opens a BTF: a zip archive, a UBO2003 folder, an RTI folder, or an RTI `.lp` file.
 pub(crate) fn open(path: &Path) -> Result<Btf> {
     let meta = std::fs::metadata(path).map_err(|e| BtfError::io(path, e))?;
@@ -137,7 +141,7 @@ impl Container {
                 if prefix.is_none() && member.size() > MAX_FILE_BYTES {
                     return Err(too_big(member.size()));
                 }
-                buf.reserve(member.size().min(limit) as usize);
+                buf.reserve(member.size().min(limit).min(MAX_RESERVE) as usize);
                 (&mut member)
                     .take(limit)
                     .read_to_end(&mut buf)
@@ -155,7 +159,7 @@ impl Container {
                 if prefix.is_none() && len > MAX_FILE_BYTES {
                     return Err(too_big(len));
                 }
-                buf.reserve(len.min(limit) as usize);
+                buf.reserve(len.min(limit).min(MAX_RESERVE) as usize);
                 file.take(limit)
                     .read_to_end(&mut buf)
                     .map_err(|e| BtfError::io(&path, e))?;
