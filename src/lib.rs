@@ -27,9 +27,12 @@
 //! let image = btf.image(0, 10).unwrap(); // view 0, light 10: (3, 64, 64) linear RGB
 //! assert_eq!(image.dim(), (3, 64, 64));
 //! ```
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod btf;
 pub mod color;
+pub mod decompose;
+mod fft;
+pub mod mrf;
 pub mod progress;

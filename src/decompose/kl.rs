@@ -1,0 +1,120 @@
+//! Karhunen-Loeve (principal component) decorrelation of the three colour channels of a
+//! subspace image (seed 001, sec. 5.3.1; mrf_math.md 1(c)), so that each factor can be modelled
+//! by its own mono-spectral MRF.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use ndarray::{Array2, Array3, Axis};
+
+/// A colour mean and orthonormal basis: `factor = T^T (rgb - mean)`, `rgb = T factor + mean`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KlBasis {
+    /// Mean colour, linear RGB.
+    pub mean: [f64; 3],
+    /// Columns are the eigenvectors of the colour covariance, by decreasing variance.
+    pub basis: [[f64; 3]; 3],
+    /// The variance of each factor (the eigenvalues), decreasing.
+    pub variances: [f64; 3],
+}
+
+impl KlBasis {
+    /// Fits the basis to a planar `(3, h, w)` image.
+    pub fn fit(image: &Array3<f32>) -> Self {
+        let n = (image.len() / 3).max(1) as f64;
+        let mean: [f64; 3] = std::array::from_fn(|c| {
+            image
+                .index_axis(Axis(0), c)
+                .iter()
+                .map(|&v| f64::from(v))
+                .sum::<f64>()
+                / n
+        });
+        let mut cov = Matrix3::<f64>::zeros();
+        let (_, h, w) = image.dim();
+        for y in 0..h {
+            for x in 0..w {
+                let d = Vector3::from_fn(|c, _| f64::from(image[[c, y, x]]) - mean[c]);
+                cov += d * d.transpose();
+            }
+        }
+        cov /= n;
+        let eig = SymmetricEigen::new(cov);
+        let mut order = [0usize, 1, 2];
+        order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+        let basis =
+            std::array::from_fn(|row| std::array::from_fn(|k| eig.eigenvectors[(row, order[k])]));
+        let variances = std::array::from_fn(|k| eig.eigenvalues[order[k]].max(0.0));
+        Self {
+            mean,
+            basis,
+            variances,
+        }
+    }
+
+    /// The three factor planes of an image, `(h, w)` each.
+    pub fn forward(&self, image: &Array3<f32>) -> [Array2<f64>; 3] {
+        let (_, h, w) = image.dim();
+        std::array::from_fn(|k| {
+            Array2::from_shape_fn((h, w), |(y, x)| {
+                (0..3)
+                    .map(|c| self.basis[c][k] * (f64::from(image[[c, y, x]]) - self.mean[c]))
+                    .sum()
+            })
+        })
+    }
+
+    /// The image from its factor planes (all of one shape).
+    pub fn inverse(&self, factors: &[Array2<f64>; 3]) -> Array3<f32> {
+        let (h, w) = factors[0].dim();
+        Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+            let v: f64 = (0..3).map(|k| self.basis[c][k] * factors[k][[y, x]]).sum();
+            (v + self.mean[c]) as f32
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn basis_is_orthonormal_and_round_trips() {
+        let img = Array3::from_shape_fn((3, 9, 11), |(c, y, x)| {
+            let t = (x as f32 * 0.7 + y as f32 * 0.3).sin();
+            [
+                0.5 + 0.3 * t,
+                0.4 + 0.2 * t + 0.01 * x as f32,
+                0.2 + 0.05 * (y as f32).cos(),
+            ][c]
+        });
+        let kl = KlBasis::fit(&img);
+        for a in 0..3 {
+            for b in 0..3 {
+                let dot: f64 = (0..3).map(|c| kl.basis[c][a] * kl.basis[c][b]).sum();
+                assert!((dot - if a == b { 1.0 } else { 0.0 }).abs() < 1e-10);
+            }
+        }
+        assert!(kl.variances[0] >= kl.variances[1] && kl.variances[1] >= kl.variances[2]);
+        let f = kl.forward(&img);
+        // Factors are uncorrelated.
+        let n = f[0].len() as f64;
+        let c01: f64 = f[0]
+            .iter()
+            .zip(f[1].iter())
+            .map(|(a, b)| a * b)
+            .sum::<f64>()
+            / n;
+        assert!(c01.abs() < 1e-9);
+        let back = kl.inverse(&f);
+        let err = (&back - &img).mapv(f32::abs).fold(0.0f32, |m, &v| m.max(v));
+        assert!(err < 1e-6, "{err}");
+    }
+
+    #[test]
+    fn grey_and_constant_images_do_not_break() {
+        let flat = Array3::from_elem((3, 4, 4), 0.25f32);
+        let kl = KlBasis::fit(&flat);
+        assert!(kl.basis.iter().flatten().all(|v| v.is_finite()));
+        let back = kl.inverse(&kl.forward(&flat));
+        assert!(back.iter().all(|v| (v - 0.25).abs() < 1e-7));
+    }
+}

@@ -1,0 +1,193 @@
+//! Gaussian-Laplacian pyramid (Burt and Adelson 1983), the survey's spatial factorisation of a
+//! subspace image into band-limited factors (seed 001, sec. 5.3.1; mrf_math.md 1(d)).
+//!
+//! REDUCE blurs with the separable 5-tap kernel `[0.05, 0.25, 0.4, 0.25, 0.05]` (a = 0.4) and
+//! keeps every other sample (sizes `ceil(n / 2)`, not necessarily powers of two); EXPAND inserts
+//! zeros up to an explicit target size and blurs with twice the kernel. Band k is
+//! `G_k - EXPAND(G_{k+1})` and the last band is the coarsest Gaussian level, so collapsing is
+//! exact by construction. Borders are mirrored (without repeating the edge sample).
+
+use ndarray::{Array2, Axis};
+
+/// The generating kernel, a = 0.4.
+const KERNEL: [f64; 5] = [0.05, 0.25, 0.4, 0.25, 0.05];
+
+/// Mirror an index into [0, n) without repeating the edge: -1 -> 1, n -> n - 2.
+fn mirror(i: isize, n: usize) -> usize {
+    let n = n as isize;
+    if n == 1 {
+        return 0;
+    }
+    let period = 2 * (n - 1);
+    let m = i.rem_euclid(period);
+    (if m < n { m } else { period - m }) as usize
+}
+
+/// Blurs along one axis with the kernel, mirrored borders.
+fn blur_axis(input: &Array2<f64>, axis: usize) -> Array2<f64> {
+    let mut out = Array2::zeros(input.dim());
+    let n = input.len_of(Axis(axis));
+    for (src, mut dst) in input
+        .lanes(Axis(axis))
+        .into_iter()
+        .zip(out.lanes_mut(Axis(axis)))
+    {
+        for i in 0..n {
+            dst[i] = KERNEL
+                .iter()
+                .enumerate()
+                .map(|(k, w)| w * src[mirror(i as isize + k as isize - 2, n)])
+                .sum();
+        }
+    }
+    out
+}
+
+/// Upsamples one axis to length `target` (zero insertion) and blurs with twice the kernel.
+fn expand_axis(input: &Array2<f64>, axis: usize, target: usize) -> Array2<f64> {
+    let mut shape = [input.nrows(), input.ncols()];
+    shape[axis] = target;
+    let mut out = Array2::zeros(shape);
+    let n_in = input.len_of(Axis(axis));
+    for (src, mut dst) in input
+        .lanes(Axis(axis))
+        .into_iter()
+        .zip(out.lanes_mut(Axis(axis)))
+    {
+        for i in 0..target {
+            let mut acc = 0.0;
+            for (k, w) in KERNEL.iter().enumerate() {
+                let j = mirror(i as isize + k as isize - 2, target);
+                if j.is_multiple_of(2) && j / 2 < n_in {
+                    acc += 2.0 * w * src[j / 2];
+                }
+            }
+            dst[i] = acc;
+        }
+    }
+    out
+}
+
+/// REDUCE: blur and keep every other row and column; shape `(ceil(h/2), ceil(w/2))`.
+pub fn reduce(image: &Array2<f64>) -> Array2<f64> {
+    let blurred = blur_axis(&blur_axis(image, 0), 1);
+    blurred.slice(ndarray::s![..;2, ..;2]).to_owned()
+}
+
+/// EXPAND to an explicit `(rows, cols)` (the size of the finer level).
+pub fn expand(image: &Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
+    expand_axis(&expand_axis(image, 0, rows), 1, cols)
+}
+
+/// A Laplacian pyramid: band 0 is the finest, the last band the coarse Gaussian residual.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pyramid {
+    /// The bands, finest first; band k has shape about `(h / 2^k, w / 2^k)`.
+    pub bands: Vec<Array2<f64>>,
+}
+
+impl Pyramid {
+    /// Splits `image` into `levels` bands (at least 1; fewer if the image gets smaller than
+    /// 2x2 first).
+    pub fn decompose(image: &Array2<f64>, levels: usize) -> Self {
+        let mut bands = Vec::with_capacity(levels);
+        let mut current = image.clone();
+        for _ in 1..levels.max(1) {
+            if current.nrows() < 2 || current.ncols() < 2 {
+                break;
+            }
+            let coarse = reduce(&current);
+            let up = expand(&coarse, current.nrows(), current.ncols());
+            bands.push(&current - &up);
+            current = coarse;
+        }
+        bands.push(current);
+        Self { bands }
+    }
+
+    /// Sums the bands back into one image: the inverse of [`Pyramid::decompose`] (exact up to
+    /// rounding). Bands may be synthesized ones, of any consistent sizes.
+    pub fn collapse(&self) -> Array2<f64> {
+        let mut iter = self.bands.iter().rev();
+        let mut current = iter
+            .next()
+            .cloned()
+            .unwrap_or_else(|| Array2::zeros((0, 0)));
+        for band in iter {
+            current = band + &expand(&current, band.nrows(), band.ncols());
+        }
+        current
+    }
+
+    /// Band shapes for an image of `rows` x `cols` with `levels` levels.
+    pub fn shapes(rows: usize, cols: usize, levels: usize) -> Vec<(usize, usize)> {
+        let mut shapes = vec![(rows, cols)];
+        while shapes.len() < levels.max(1) {
+            let (r, c) = shapes[shapes.len() - 1];
+            if r < 2 || c < 2 {
+                break;
+            }
+            shapes.push((r.div_ceil(2), c.div_ceil(2)));
+        }
+        shapes
+    }
+}
+
+/// A sensible number of levels: the coarsest band keeps at least `min_side` pixels a side.
+pub fn auto_levels(rows: usize, cols: usize, min_side: usize, max_levels: usize) -> usize {
+    let mut levels = 1;
+    let (mut r, mut c) = (rows, cols);
+    while levels < max_levels && r.div_ceil(2) >= min_side && c.div_ceil(2) >= min_side {
+        r = r.div_ceil(2);
+        c = c.div_ceil(2);
+        levels += 1;
+    }
+    levels
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn field(h: usize, w: usize) -> Array2<f64> {
+        Array2::from_shape_fn((h, w), |(i, j)| {
+            ((i * 7 + j * 13) % 17) as f64 + (i as f64 * 0.3).sin()
+        })
+    }
+
+    #[test]
+    fn collapse_is_exact_for_odd_and_even_sizes() {
+        for (h, w, levels) in [(64, 64, 4), (37, 50, 3), (5, 3, 5), (1, 9, 3), (2, 2, 2)] {
+            let x = field(h, w);
+            let p = Pyramid::decompose(&x, levels);
+            let shapes: Vec<_> = p.bands.iter().map(|b| b.dim()).collect();
+            assert_eq!(
+                shapes,
+                Pyramid::shapes(h, w, levels)[..shapes.len()].to_vec()
+            );
+            let back = p.collapse();
+            let err = (&back - &x).mapv(f64::abs).fold(0.0f64, |m, &v| m.max(v));
+            assert!(err < 1e-12, "{h}x{w}: {err}");
+        }
+    }
+
+    #[test]
+    fn kernel_preserves_constants() {
+        let c = Array2::from_elem((9, 12), 3.5);
+        let r = reduce(&c);
+        assert!(r.iter().all(|v| (v - 3.5).abs() < 1e-12));
+        let e = expand(&r, 9, 12);
+        assert!(e.iter().all(|v| (v - 3.5).abs() < 1e-12), "{e:?}");
+        // A constant image has all its energy in the last band.
+        let p = Pyramid::decompose(&c, 3);
+        assert!(p.bands[0].iter().all(|v| v.abs() < 1e-12));
+    }
+
+    #[test]
+    fn auto_levels_keeps_the_coarsest_band_large_enough() {
+        assert_eq!(auto_levels(128, 128, 16, 8), 4);
+        assert_eq!(auto_levels(64, 64, 16, 8), 3);
+        assert_eq!(auto_levels(10, 10, 16, 8), 1);
+        assert_eq!(auto_levels(1024, 1024, 16, 4), 4);
+    }
+}

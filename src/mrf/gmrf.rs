@@ -1,0 +1,314 @@
+//! The Gaussian Markov random field (non-causal, symmetric neighbourhood) model of one band
+//! (seed 001, sec. 5.3.2; mrf_math.md sec. 3): `Y_r = sum_s gamma_s (Y_{r+s} + Y_{r-s}) + e_r`.
+//! Least-squares (pseudo-likelihood) estimates on the torus, exact toroidal synthesis by FFT
+//! (so the result tiles seamlessly), and a check that the spectral density
+//! `sigma^2 / (1 - 2 sum_s gamma_s cos(omega . s))` stays positive, with a repair by shrinkage.
+
+use nalgebra::{DMatrix, DVector};
+use ndarray::Array2;
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use rand_pcg::Pcg64Mcg;
+
+use super::neighbourhood::{MAX_ORDER, causal};
+use crate::fft;
+
+/// Smallest spectral denominator accepted (the model is valid when it stays above 0).
+const MU_FLOOR: f64 = 1e-3;
+
+/// A fitted GMRF model of one band.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GmrfModel {
+    /// Neighbourhood order: the half-set is [`causal`]`(order)`, each offset paired with its
+    /// mirror image.
+    pub order: u8,
+    /// One coefficient per half-set offset.
+    pub gamma: Vec<f64>,
+    /// Conditional variance.
+    pub sigma2: f64,
+    /// Band mean.
+    pub mean: f64,
+}
+
+/// The fitted model and what was done to it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GmrfFit {
+    /// The chosen (and possibly repaired) model.
+    pub model: GmrfModel,
+    /// (order, BIC-like score `t ln sigma^2 + eta ln t`, lower is better) of every candidate.
+    pub candidates: Vec<(u8, f64)>,
+    /// How an invalid (non-positive spectrum) estimate was repaired, if it was.
+    pub repair: Option<String>,
+}
+
+fn wrap(i: isize, n: usize) -> usize {
+    i.rem_euclid(n as isize) as usize
+}
+
+/// Least squares for the first `eta` half-offsets on the torus: (gamma, sigma^2).
+fn least_squares(y: &Array2<f64>, offsets: &[(isize, isize)]) -> Option<(Vec<f64>, f64)> {
+    let (h, w) = y.dim();
+    let eta = offsets.len();
+    let mut xtx = DMatrix::<f64>::zeros(eta, eta);
+    let mut xty = DVector::<f64>::zeros(eta);
+    let mut x = vec![0.0; eta];
+    let pair = |r: usize, c: usize, (s1, s2): (isize, isize)| {
+        y[[wrap(r as isize + s1, h), wrap(c as isize + s2, w)]]
+            + y[[wrap(r as isize - s1, h), wrap(c as isize - s2, w)]]
+    };
+    for r in 0..h {
+        for c in 0..w {
+            for (k, &s) in offsets.iter().enumerate() {
+                x[k] = pair(r, c, s);
+            }
+            for i in 0..eta {
+                xty[i] += x[i] * y[[r, c]];
+                for j in 0..=i {
+                    xtx[(i, j)] += x[i] * x[j];
+                }
+            }
+        }
+    }
+    for i in 0..eta {
+        for j in 0..i {
+            xtx[(j, i)] = xtx[(i, j)];
+        }
+    }
+    let ridge = 1e-9 * xtx.trace() / eta as f64 + 1e-300;
+    for i in 0..eta {
+        xtx[(i, i)] += ridge;
+    }
+    let gamma = xtx.cholesky()?.solve(&xty);
+    let mut rss = 0.0;
+    for r in 0..h {
+        for c in 0..w {
+            let pred: f64 = offsets
+                .iter()
+                .zip(gamma.iter())
+                .map(|(&s, g)| g * pair(r, c, s))
+                .sum();
+            rss += (y[[r, c]] - pred).powi(2);
+        }
+    }
+    Some((gamma.iter().copied().collect(), rss / (h * w) as f64))
+}
+
+impl GmrfModel {
+    /// A model of a constant band.
+    pub fn constant(mean: f64) -> Self {
+        Self {
+            order: 0,
+            gamma: Vec::new(),
+            sigma2: 0.0,
+            mean,
+        }
+    }
+
+    /// Fits a band: mean removed, every order up to `max_order` estimated by least squares on
+    /// the torus, the best by `t ln sigma^2 + eta ln t` kept, and shrunk if its spectrum is not
+    /// positive on a fine frequency grid.
+    pub fn fit(band: &Array2<f64>, max_order: usize) -> GmrfFit {
+        let (h, w) = band.dim();
+        let t = (h * w).max(1);
+        let mean = band.iter().sum::<f64>() / t as f64;
+        let y = band.mapv(|v| v - mean);
+        let var = y.iter().map(|v| v * v).sum::<f64>() / t as f64;
+        let scale = mean.abs().max(var.sqrt()).max(1e-300);
+        if !var.is_finite() || var <= 1e-20 * scale * scale || var < 1e-30 {
+            return GmrfFit {
+                model: Self::constant(mean),
+                candidates: Vec::new(),
+                repair: None,
+            };
+        }
+        let mut candidates = Vec::new();
+        let mut best: Option<(f64, Self)> = None;
+        for k in 1..=max_order.min(MAX_ORDER) {
+            let offsets = causal(k);
+            // Offsets must fit in the band without wrapping onto themselves, with data to spare.
+            let (up, side) = offsets.iter().fold((0, 0), |(u, s), &(s1, s2)| {
+                (u.max(s1.unsigned_abs()), s.max(s2.unsigned_abs()))
+            });
+            if 2 * up >= h || 2 * side >= w || t < 20 * offsets.len() {
+                break;
+            }
+            let Some((gamma, sigma2)) = least_squares(&y, offsets) else {
+                continue;
+            };
+            let score = t as f64 * sigma2.max(1e-300).ln() + offsets.len() as f64 * (t as f64).ln();
+            candidates.push((k as u8, score));
+            if best.as_ref().is_none_or(|b| score < b.0) {
+                best = Some((
+                    score,
+                    Self {
+                        order: k as u8,
+                        gamma,
+                        sigma2,
+                        mean,
+                    },
+                ));
+            }
+        }
+        let Some((_, model)) = best else {
+            return GmrfFit {
+                model: Self {
+                    order: 0,
+                    gamma: Vec::new(),
+                    sigma2: var,
+                    mean,
+                },
+                candidates,
+                repair: Some("band too small for any neighbourhood: white noise".into()),
+            };
+        };
+        let (model, repair) = model.made_valid(64, 64);
+        GmrfFit {
+            model,
+            candidates,
+            repair,
+        }
+    }
+
+    /// `mu(omega) = 1 - 2 sum_s gamma_s cos(omega . s)` on the `rows` x `cols` DFT grid.
+    fn denominators(&self, rows: usize, cols: usize) -> Array2<f64> {
+        let offsets = causal(self.order as usize);
+        let tau = 2.0 * std::f64::consts::PI;
+        Array2::from_shape_fn((rows, cols), |(k1, k2)| {
+            let (w1, w2) = (tau * k1 as f64 / rows as f64, tau * k2 as f64 / cols as f64);
+            1.0 - 2.0
+                * offsets
+                    .iter()
+                    .zip(&self.gamma)
+                    .map(|(&(s1, s2), g)| g * (w1 * s1 as f64 + w2 * s2 as f64).cos())
+                    .sum::<f64>()
+        })
+    }
+
+    /// The model with its spectrum positive on a `rows` x `cols` grid: unchanged if it is,
+    /// else gamma shrunk so that the smallest denominator is [`MU_FLOOR`]; the note says what
+    /// was done.
+    pub fn made_valid(&self, rows: usize, cols: usize) -> (Self, Option<String>) {
+        let mu = self.denominators(rows.max(1), cols.max(1));
+        let min = mu.iter().copied().fold(f64::INFINITY, f64::min);
+        if min >= MU_FLOOR {
+            return (self.clone(), None);
+        }
+        // 1 - mu is the neighbour sum; scaling gamma by kappa scales it by kappa.
+        let peak = mu.iter().map(|m| 1.0 - m).fold(f64::NEG_INFINITY, f64::max);
+        let kappa = (1.0 - MU_FLOOR) / peak;
+        let repaired = Self {
+            gamma: self.gamma.iter().map(|g| g * kappa).collect(),
+            ..self.clone()
+        };
+        (
+            repaired,
+            Some(format!(
+                "spectrum not positive (min {min:.3}); shrank gamma by {kappa:.3}"
+            )),
+        )
+    }
+
+    /// An exact sample on the `rows` x `cols` torus (it tiles seamlessly): white noise shaped
+    /// by `sqrt(sigma^2 / mu)` in the frequency domain. The same seed and size give the same
+    /// driving noise for every model (coherent subspaces).
+    pub fn synthesize(&self, rows: usize, cols: usize, seed: u64) -> Array2<f64> {
+        if rows == 0 || cols == 0 {
+            return Array2::zeros((rows, cols));
+        }
+        let (valid, _) = self.made_valid(rows, cols);
+        let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        let noise = Array2::from_shape_simple_fn((rows, cols), || StandardNormal.sample(&mut rng));
+        let mut spectrum = fft::forward(&noise);
+        let mu = valid.denominators(rows, cols);
+        let sigma2 = self.sigma2.max(0.0);
+        spectrum.zip_mut_with(&mu, |s, &m| *s *= (sigma2 / m).sqrt());
+        fft::inverse_real(&spectrum).mapv(|v| v + self.mean)
+    }
+
+    /// The stationary variance of the model on a `rows` x `cols` torus:
+    /// `(1 / MN) sum_k sigma^2 / mu_k`.
+    pub fn variance(&self, rows: usize, cols: usize) -> f64 {
+        let mu = self.made_valid(rows, cols).0.denominators(rows, cols);
+        mu.iter().map(|m| self.sigma2 / m).sum::<f64>() / mu.len() as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn truth() -> GmrfModel {
+        GmrfModel {
+            order: 2,
+            gamma: vec![0.2, 0.15, 0.05, -0.04],
+            sigma2: 2.0,
+            mean: -1.0,
+        }
+    }
+
+    #[test]
+    fn least_squares_recovers_parameters_on_average() {
+        let m = truth();
+        let mut mean_gamma = [0.0; 4];
+        let mut mean_sigma = 0.0;
+        let runs = 6;
+        for seed in 0..runs {
+            let fit = GmrfModel::fit(&m.synthesize(128, 128, seed), 2).model;
+            assert_eq!(fit.order, 2);
+            for (a, g) in mean_gamma.iter_mut().zip(&fit.gamma) {
+                *a += g / runs as f64;
+            }
+            mean_sigma += fit.sigma2 / runs as f64;
+        }
+        for (a, t) in mean_gamma.iter().zip(&m.gamma) {
+            assert!((a - t).abs() < 0.015, "{mean_gamma:?}");
+        }
+        assert!((mean_sigma - 2.0).abs() < 0.1, "{mean_sigma}");
+    }
+
+    #[test]
+    fn sample_variance_matches_the_spectral_formula() {
+        let m = GmrfModel {
+            mean: 0.0,
+            ..truth()
+        };
+        let expected = m.variance(256, 256);
+        let y = m.synthesize(256, 256, 42);
+        let var = y.iter().map(|v| v * v).sum::<f64>() / y.len() as f64;
+        assert!((var / expected - 1.0).abs() < 0.05, "{var} vs {expected}");
+    }
+
+    #[test]
+    fn invalid_spectra_are_repaired() {
+        let bad = GmrfModel {
+            order: 1,
+            gamma: vec![0.4, 0.3],
+            sigma2: 1.0,
+            mean: 0.0,
+        };
+        let (fixed, note) = bad.made_valid(64, 64);
+        assert!(note.is_some());
+        let min = fixed
+            .denominators(64, 64)
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        assert!(min >= MU_FLOOR * 0.999, "{min}");
+        assert!(bad.synthesize(32, 32, 1).iter().all(|v| v.is_finite()));
+        assert!(truth().made_valid(64, 64).1.is_none());
+    }
+
+    #[test]
+    fn synthesis_is_deterministic_and_tiles() {
+        let m = truth();
+        assert_eq!(m.synthesize(20, 30, 3), m.synthesize(20, 30, 3));
+        let y = m.synthesize(64, 64, 3);
+        // Difference across the wrap is like a difference inside.
+        let inner: f64 = (0..64).map(|r| (y[[r, 31]] - y[[r, 32]]).powi(2)).sum();
+        let seam: f64 = (0..64).map(|r| (y[[r, 63]] - y[[r, 0]]).powi(2)).sum();
+        assert!(
+            seam < 2.5 * inner && inner < 2.5 * seam,
+            "{inner} vs {seam}"
+        );
+    }
+}

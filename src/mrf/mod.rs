@@ -1,0 +1,9 @@
+//! Markov random field models of single bands: the 2D causal autoregressive model and the
+//! Gaussian MRF, with their estimators, stability checks and synthesizers.
+
+pub mod car2d;
+pub mod gmrf;
+pub mod neighbourhood;
+
+pub use car2d::{Car2dFit, Car2dModel};
+pub use gmrf::{GmrfFit, GmrfModel};
