@@ -30,9 +30,12 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod analysis;
 pub mod btf;
 pub mod color;
 pub mod decompose;
 mod fft;
+pub mod model;
 pub mod mrf;
 pub mod progress;
+pub mod synthesis;

@@ -1,8 +1,10 @@
 //! Argument parsing (clap derive), one file per subcommand, and the terminal progress bar.
 
+mod analyze;
 mod convert;
 mod generate;
 mod info;
+mod synthesize;
 
 use std::io::IsTerminal;
 
@@ -22,6 +24,8 @@ use btfmrf::progress::Progress;
 ///   btfmrf generate sponge --size 128 --out sponge.zip
 ///   btfmrf info sponge.zip
 ///   btfmrf convert sponge.zip --out sponge-exr --format exr
+///   btfmrf analyze sponge.zip --model 2dcar --out sponge.btfm
+///   btfmrf synthesize sponge.btfm --size 1024 --view 0,0 --light 45,90 --out big.png
 #[derive(Debug, Parser)]
 #[command(name = "btfmrf", version, verbatim_doc_comment)]
 pub struct Cli {
@@ -44,6 +48,8 @@ enum Command {
     Generate(generate::Args),
     Info(info::Args),
     Convert(convert::Args),
+    Analyze(analyze::Args),
+    Synthesize(synthesize::Args),
 }
 
 /// Parses the command line and runs the subcommand.
@@ -53,6 +59,8 @@ pub fn run() -> anyhow::Result<()> {
         Command::Generate(args) => generate::run(args, &cli.global),
         Command::Info(args) => info::run(args, &cli.global),
         Command::Convert(args) => convert::run(args, &cli.global),
+        Command::Analyze(args) => analyze::run(args, &cli.global),
+        Command::Synthesize(args) => synthesize::run(args, &cli.global),
     }
 }
 

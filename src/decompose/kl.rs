@@ -17,6 +17,15 @@ pub struct KlBasis {
 }
 
 impl KlBasis {
+    /// No change of basis and zero mean (for models that take the colour channels as they are).
+    pub fn identity() -> Self {
+        Self {
+            mean: [0.0; 3],
+            basis: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            variances: [0.0; 3],
+        }
+    }
+
     /// Fits the basis to a planar `(3, h, w)` image.
     pub fn fit(image: &Array3<f32>) -> Self {
         let n = (image.len() / 3).max(1) as f64;

@@ -7,4 +7,4 @@ pub mod pyramid;
 
 pub use cluster::{ClusterOptions, SubspaceClustering};
 pub use kl::KlBasis;
-pub use pyramid::Pyramid;
+pub use pyramid::{Border, Pyramid};

@@ -23,6 +23,24 @@ fn mirror(i: isize, n: usize) -> usize {
     (if m < n { m } else { period - m }) as usize
 }
 
+/// How samples beyond the border are found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Border {
+    /// Mirrored (measured images, which do not wrap).
+    Mirror,
+    /// Wrapped around (tileable synthesis).
+    Periodic,
+}
+
+impl Border {
+    fn index(self, i: isize, n: usize) -> usize {
+        match self {
+            Border::Mirror => mirror(i, n),
+            Border::Periodic => i.rem_euclid(n as isize) as usize,
+        }
+    }
+}
+
 /// Blurs along one axis with the kernel, mirrored borders.
 fn blur_axis(input: &Array2<f64>, axis: usize) -> Array2<f64> {
     let mut out = Array2::zeros(input.dim());
@@ -44,7 +62,7 @@ fn blur_axis(input: &Array2<f64>, axis: usize) -> Array2<f64> {
 }
 
 /// Upsamples one axis to length `target` (zero insertion) and blurs with twice the kernel.
-fn expand_axis(input: &Array2<f64>, axis: usize, target: usize) -> Array2<f64> {
+fn expand_axis(input: &Array2<f64>, axis: usize, target: usize, border: Border) -> Array2<f64> {
     let mut shape = [input.nrows(), input.ncols()];
     shape[axis] = target;
     let mut out = Array2::zeros(shape);
@@ -57,7 +75,7 @@ fn expand_axis(input: &Array2<f64>, axis: usize, target: usize) -> Array2<f64> {
         for i in 0..target {
             let mut acc = 0.0;
             for (k, w) in KERNEL.iter().enumerate() {
-                let j = mirror(i as isize + k as isize - 2, target);
+                let j = border.index(i as isize + k as isize - 2, target);
                 if j.is_multiple_of(2) && j / 2 < n_in {
                     acc += 2.0 * w * src[j / 2];
                 }
@@ -74,9 +92,14 @@ pub fn reduce(image: &Array2<f64>) -> Array2<f64> {
     blurred.slice(ndarray::s![..;2, ..;2]).to_owned()
 }
 
-/// EXPAND to an explicit `(rows, cols)` (the size of the finer level).
+/// EXPAND to an explicit `(rows, cols)` (the size of the finer level), mirrored borders.
 pub fn expand(image: &Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
-    expand_axis(&expand_axis(image, 0, rows), 1, cols)
+    expand_with(image, rows, cols, Border::Mirror)
+}
+
+/// EXPAND with a chosen border rule.
+pub fn expand_with(image: &Array2<f64>, rows: usize, cols: usize, border: Border) -> Array2<f64> {
+    expand_axis(&expand_axis(image, 0, rows, border), 1, cols, border)
 }
 
 /// A Laplacian pyramid: band 0 is the finest, the last band the coarse Gaussian residual.
@@ -108,13 +131,19 @@ impl Pyramid {
     /// Sums the bands back into one image: the inverse of [`Pyramid::decompose`] (exact up to
     /// rounding). Bands may be synthesized ones, of any consistent sizes.
     pub fn collapse(&self) -> Array2<f64> {
+        self.collapse_with(Border::Mirror)
+    }
+
+    /// Collapses with a chosen border rule: [`Border::Periodic`] keeps tileable bands (of even
+    /// sizes down the pyramid) tileable.
+    pub fn collapse_with(&self, border: Border) -> Array2<f64> {
         let mut iter = self.bands.iter().rev();
         let mut current = iter
             .next()
             .cloned()
             .unwrap_or_else(|| Array2::zeros((0, 0)));
         for band in iter {
-            current = band + &expand(&current, band.nrows(), band.ncols());
+            current = band + &expand_with(&current, band.nrows(), band.ncols(), border);
         }
         current
     }

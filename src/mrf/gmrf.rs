@@ -161,11 +161,43 @@ impl GmrfModel {
                 repair: Some("band too small for any neighbourhood: white noise".into()),
             };
         };
-        let (model, repair) = model.made_valid(64, 64);
+        let (model, mut repair) = model.made_valid(64, 64);
+        // A valid spectrum can still be nearly singular at low frequencies (a near-unit-root
+        // estimate), which paints huge blotches over an enlargement: shrink until the model's
+        // variance is within 4x the data's.
+        let model = if model.variance(64, 64) > 4.0 * var {
+            let (mut lo, mut hi) = (0.0, 1.0);
+            for _ in 0..30 {
+                let mid = 0.5 * (lo + hi);
+                if model.scaled(mid).variance(64, 64) <= 4.0 * var {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            let note = format!(
+                "variance {:.3}x the data's; shrank gamma by {lo:.3}",
+                model.variance(64, 64) / var
+            );
+            repair = Some(match repair {
+                Some(r) => format!("{r}; {note}"),
+                None => note,
+            });
+            model.scaled(lo)
+        } else {
+            model
+        };
         GmrfFit {
             model,
             candidates,
             repair,
+        }
+    }
+
+    fn scaled(&self, kappa: f64) -> Self {
+        Self {
+            gamma: self.gamma.iter().map(|g| g * kappa).collect(),
+            ..self.clone()
         }
     }
 
@@ -196,10 +228,7 @@ impl GmrfModel {
         // 1 - mu is the neighbour sum; scaling gamma by kappa scales it by kappa.
         let peak = mu.iter().map(|m| 1.0 - m).fold(f64::NEG_INFINITY, f64::max);
         let kappa = (1.0 - MU_FLOOR) / peak;
-        let repaired = Self {
-            gamma: self.gamma.iter().map(|g| g * kappa).collect(),
-            ..self.clone()
-        };
+        let repaired = self.scaled(kappa);
         (
             repaired,
             Some(format!(

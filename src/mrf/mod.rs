@@ -2,8 +2,10 @@
 //! Gaussian MRF, with their estimators, stability checks and synthesizers.
 
 pub mod car2d;
+pub mod car3d;
 pub mod gmrf;
 pub mod neighbourhood;
 
 pub use car2d::{Car2dFit, Car2dModel};
+pub use car3d::{Car3dFit, Car3dModel};
 pub use gmrf::{GmrfFit, GmrfModel};

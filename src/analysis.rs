@@ -1,0 +1,203 @@
+//! Analysis: a measured BTF to a [`MaterialModel`] (seed 001, sec. 5.3): cluster the view x
+//! light space, then for every subspace image decorrelate colour (KL, except for the 3D CAR),
+//! split into a Gaussian-Laplacian pyramid and fit one MRF per band.
+
+use ndarray::{Array3, Axis, stack};
+use rayon::prelude::*;
+
+use crate::btf::Btf;
+use crate::decompose::pyramid::auto_levels;
+use crate::decompose::{ClusterOptions, KlBasis, Pyramid, SubspaceClustering};
+use crate::model::{
+    BandModel, LevelModel, MaterialModel, ModelError, ModelKind, Result, SubspaceModel,
+};
+use crate::mrf::{
+    Car2dModel, Car3dModel, GmrfModel, car3d::MAX_ORDER_3D, neighbourhood::MAX_ORDER,
+};
+use crate::progress::Progress;
+
+/// Settings of [`analyze`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnalysisOptions {
+    /// The band model family. Default: 2D CAR.
+    pub kind: ModelKind,
+    /// Number of subspace images c. Default: 20 (the survey's choice).
+    pub clusters: usize,
+    /// Pyramid levels; `None` picks as many as keep the coarsest band at least 16 pixels a
+    /// side, at most 4.
+    pub levels: Option<usize>,
+    /// Largest neighbourhood order tried (1..=6; the 3D CAR stops at 4). Default: 6.
+    pub max_order: usize,
+    /// Seed of the clustering. Default: 1.
+    pub seed: u64,
+}
+
+impl Default for AnalysisOptions {
+    fn default() -> Self {
+        Self {
+            kind: ModelKind::Car2d,
+            clusters: 20,
+            levels: None,
+            max_order: MAX_ORDER,
+            seed: 1,
+        }
+    }
+}
+
+/// What analysis did besides producing the model.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct AnalysisReport {
+    /// Every repair of an unstable or invalid band estimate, with where it happened.
+    pub repairs: Vec<String>,
+}
+
+/// Fits a material model to `btf`.
+///
+/// # Errors
+/// Options out of range, or an image of the BTF cannot be read.
+pub fn analyze(
+    btf: &Btf,
+    options: &AnalysisOptions,
+    progress: &dyn Progress,
+) -> Result<(MaterialModel, AnalysisReport)> {
+    if options.clusters == 0 || options.clusters > 4096 {
+        return Err(ModelError::parameter(
+            "--clusters",
+            format!("{} is outside 1..=4096", options.clusters),
+        ));
+    }
+    if !(1..=MAX_ORDER).contains(&options.max_order) {
+        return Err(ModelError::parameter(
+            "--max-order",
+            format!("{} is outside 1..={MAX_ORDER}", options.max_order),
+        ));
+    }
+    let (w, h) = (btf.width() as usize, btf.height() as usize);
+    let levels = options.levels.unwrap_or_else(|| auto_levels(h, w, 16, 4));
+    if levels == 0 || levels > usize::from(crate::model::format::MAX_LEVELS) {
+        return Err(ModelError::parameter(
+            "--levels",
+            format!("{levels} is outside 1..=16"),
+        ));
+    }
+    let clustering = SubspaceClustering::fit(
+        btf,
+        &ClusterOptions {
+            clusters: options.clusters,
+            seed: options.seed,
+            ..ClusterOptions::default()
+        },
+        progress,
+    )?;
+    progress.start("fitting models", clustering.clusters() as u64);
+    let fitted: Vec<(SubspaceModel, Vec<String>)> = clustering
+        .representatives
+        .par_iter()
+        .enumerate()
+        .map(|(k, &(v, l))| {
+            let image = btf.image(v, l)?;
+            let (kl, levels, notes) = fit_subspace(&image, options.kind, levels, options.max_order);
+            progress.advance(1);
+            let notes = notes
+                .into_iter()
+                .map(|n| format!("subspace {k}: {n}"))
+                .collect();
+            Ok((
+                SubspaceModel {
+                    representative: (v as u16, l as u16),
+                    kl,
+                    levels,
+                },
+                notes,
+            ))
+        })
+        .collect::<Result<_>>()?;
+    progress.finish();
+    let mut report = AnalysisReport::default();
+    let mut subspaces = Vec::with_capacity(fitted.len());
+    for (s, notes) in fitted {
+        subspaces.push(s);
+        report.repairs.extend(notes);
+    }
+    let model = MaterialModel {
+        kind: options.kind,
+        views: btf.views().clone(),
+        lights: btf.lights().clone(),
+        width: btf.width(),
+        height: btf.height(),
+        cluster_table: clustering.labels,
+        subspaces,
+        range_map: None,
+    };
+    Ok((model, report))
+}
+
+/// Fits one subspace image: its colour basis (the identity for the 3D CAR), its level
+/// models, and notes on any repair.
+fn fit_subspace(
+    image: &Array3<f32>,
+    kind: ModelKind,
+    levels: usize,
+    max_order: usize,
+) -> (KlBasis, Vec<LevelModel>, Vec<String>) {
+    let mut notes = Vec::new();
+    match kind {
+        ModelKind::Car3d => {
+            let channels: Vec<Pyramid> = (0..3)
+                .map(|c| Pyramid::decompose(&image.index_axis(Axis(0), c).mapv(f64::from), levels))
+                .collect();
+            let models = (0..channels[0].bands.len())
+                .into_par_iter()
+                .map(|lv| {
+                    let views: Vec<_> = channels.iter().map(|p| p.bands[lv].view()).collect();
+                    let band = stack(Axis(0), &views).expect("equal band shapes");
+                    let fit = Car3dModel::fit(&band, max_order.min(MAX_ORDER_3D));
+                    (
+                        LevelModel::Joint(fit.model),
+                        fit.repair.map(|r| format!("level {lv}: {r}")),
+                    )
+                })
+                .collect::<Vec<_>>();
+            let mut out = Vec::new();
+            for (m, n) in models {
+                out.push(m);
+                notes.extend(n);
+            }
+            (KlBasis::identity(), out, notes)
+        }
+        ModelKind::Car2d | ModelKind::Gmrf => {
+            let kl = KlBasis::fit(image);
+            let pyramids: Vec<Pyramid> = kl
+                .forward(image)
+                .iter()
+                .map(|f| Pyramid::decompose(f, levels))
+                .collect();
+            let n_levels = pyramids[0].bands.len();
+            let fits: Vec<(BandModel, Option<String>)> = (0..3 * n_levels)
+                .into_par_iter()
+                .map(|i| {
+                    let (factor, lv) = (i / n_levels, i % n_levels);
+                    let band = &pyramids[factor].bands[lv];
+                    let (model, repair) = if kind == ModelKind::Car2d {
+                        let f = Car2dModel::fit(band, max_order);
+                        (BandModel::Car2d(f.model), f.repair)
+                    } else {
+                        let f = GmrfModel::fit(band, max_order);
+                        (BandModel::Gmrf(f.model), f.repair)
+                    };
+                    (
+                        model,
+                        repair.map(|r| format!("factor {factor}, level {lv}: {r}")),
+                    )
+                })
+                .collect();
+            let mut out = Vec::with_capacity(n_levels);
+            for lv in 0..n_levels {
+                let band = |factor: usize| fits[factor * n_levels + lv].0.clone();
+                out.push(LevelModel::Factors([band(0), band(1), band(2)]));
+            }
+            notes.extend(fits.into_iter().filter_map(|f| f.1));
+            (kl, out, notes)
+        }
+    }
+}

@@ -1,0 +1,252 @@
+//! `btfmrf synthesize`: images of any size from a `.btfm` model.
+
+use std::path::PathBuf;
+use std::sync::OnceLock;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use btfmrf::btf::{Btf, BtfError, Direction, DirectionSet, ImageFormat, ImageSource, io};
+use btfmrf::model::{MaterialModel, format};
+use btfmrf::synthesis::SynthesisOptions;
+use ndarray::Array3;
+
+use super::{Bar, Global, emit};
+
+/// Synthesize from a model: any size, any view and light, seed-deterministic. Only the
+/// subspace images that the requested (view, light) pairs need are synthesized.
+///
+/// With one --view and one --light and an --out ending in .png or .exr, writes that one image;
+/// otherwise a UBO2003 zip (--out X.zip) or folder of every requested view x light (the
+/// model's measured directions when none are given). Directions that were not measured are
+/// interpolated from the nearest measured pairs.
+///
+/// Examples:
+///   btfmrf synthesize stones.btfm --size 1024 --view 0,0 --light 45,90 --out lit.png
+///   btfmrf synthesize stones.btfm --size 256 --out enlarged.zip
+#[derive(Debug, clap::Args)]
+#[command(verbatim_doc_comment)]
+pub struct Args {
+    /// The model file (.btfm).
+    model: PathBuf,
+    /// Output size: N (square) or WxH, pixels.
+    #[arg(long, value_parser = parse_size)]
+    size: (usize, usize),
+    /// A view direction "theta,phi" in degrees (repeatable).
+    #[arg(long, value_parser = parse_direction)]
+    view: Vec<Direction>,
+    /// A light direction "theta,phi" in degrees (repeatable).
+    #[arg(long, value_parser = parse_direction)]
+    light: Vec<Direction>,
+    /// Seed of the driving noise: same seed, same bytes.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Make the images tile seamlessly (size must be divisible by 2^(levels-1)).
+    #[arg(long)]
+    tileable: bool,
+    /// Output: X.png or X.exr (one image), X.zip or a new folder (a BTF).
+    #[arg(long)]
+    out: PathBuf,
+    /// Image format of the members of a zip or folder output.
+    #[arg(long, value_enum, default_value_t = super::FormatArg::Png)]
+    format: super::FormatArg,
+    /// Print one JSON object (synthesis_seconds, images, subspaces_synthesized).
+    #[arg(long)]
+    json: bool,
+}
+
+/// Parses "N" or "WxH" into (rows, cols).
+fn parse_size(s: &str) -> Result<(usize, usize), String> {
+    let parse = |t: &str| {
+        t.trim()
+            .parse::<usize>()
+            .map_err(|_| format!("'{s}' is not N or WxH"))
+    };
+    match s.split_once(['x', 'X']) {
+        Some((w, h)) => Ok((parse(h)?, parse(w)?)),
+        None => parse(s).map(|n| (n, n)),
+    }
+}
+
+/// Parses "theta,phi" in degrees.
+fn parse_direction(s: &str) -> Result<Direction, String> {
+    let (t, p) = s
+        .split_once(',')
+        .ok_or_else(|| format!("'{s}' is not theta,phi"))?;
+    let theta: f64 = t
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{t}' is not a number"))?;
+    let phi: f64 = p
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{p}' is not a number"))?;
+    if !(0.0..=90.0).contains(&theta) || !phi.is_finite() {
+        return Err(format!("theta {theta} must be within 0..=90 degrees"));
+    }
+    Ok(Direction::new(theta, phi))
+}
+
+/// Synthesized images as a BTF: subspace images made once each, on first use.
+struct ModelSource {
+    model: MaterialModel,
+    options: SynthesisOptions,
+    views: DirectionSet,
+    lights: DirectionSet,
+    subspaces: Vec<OnceLock<Result<Array3<f32>, String>>>,
+}
+
+impl ImageSource for ModelSource {
+    fn load(&self, view: usize, light: usize) -> Result<Array3<f32>, BtfError> {
+        let (v, l) = (self.views.as_slice()[view], self.lights.as_slice()[light]);
+        let fail = |e: String| BtfError::Image {
+            file: self.describe(view, light),
+            reason: e,
+        };
+        let weights = self
+            .model
+            .subspace_weights(&v, &l)
+            .map_err(|e| fail(e.to_string()))?;
+        let mut out = Array3::<f32>::zeros((3, self.options.rows, self.options.cols));
+        for (k, w) in weights {
+            let part = self.subspaces[k]
+                .get_or_init(|| {
+                    self.model
+                        .synthesize_subspace(k, &self.options)
+                        .map_err(|e| e.to_string())
+                })
+                .as_ref()
+                .map_err(|e| fail(e.clone()))?;
+            out.scaled_add(w as f32, part);
+        }
+        Ok(out)
+    }
+
+    fn describe(&self, view: usize, light: usize) -> String {
+        format!("synthesized image (view {view}, light {light})")
+    }
+}
+
+pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
+    let model = format::read(&args.model)?;
+    let (rows, cols) = args.size;
+    let options = SynthesisOptions {
+        rows,
+        cols,
+        seed: args.seed,
+        tileable: args.tileable,
+    };
+    let start = Instant::now();
+    let out_name = args.out.to_string_lossy().to_ascii_lowercase();
+    let single =
+        out_name.ends_with(".png") || out_name.ends_with(".exr") || out_name.ends_with(".jpg");
+    if single {
+        let (Some(view), Some(light), 1, 1) = (
+            args.view.first(),
+            args.light.first(),
+            args.view.len(),
+            args.light.len(),
+        ) else {
+            bail!(
+                "one image (--out {}) needs exactly one --view and one --light",
+                args.out.display()
+            );
+        };
+        let subspaces = model.subspace_weights(view, light)?.len();
+        let image = model.synthesize_image(view, light, &options)?;
+        let seconds = start.elapsed().as_secs_f64();
+        io::write_image(&args.out, &image)
+            .with_context(|| format!("writing {}", args.out.display()))?;
+        report(
+            args.json,
+            &args.out,
+            1,
+            subspaces,
+            model.subspaces.len(),
+            seconds,
+        )?;
+        return Ok(());
+    }
+    let views = if args.view.is_empty() {
+        model.views.clone()
+    } else {
+        DirectionSet::new(args.view.clone())?
+    };
+    let lights = if args.light.is_empty() {
+        model.lights.clone()
+    } else {
+        DirectionSet::new(args.light.clone())?
+    };
+    let total = model.subspaces.len();
+    let source = ModelSource {
+        subspaces: (0..total).map(|_| OnceLock::new()).collect(),
+        model,
+        options,
+        views: views.clone(),
+        lights: lights.clone(),
+    };
+    let btf = Btf::from_source(
+        "synthesized",
+        views,
+        lights,
+        cols as u32,
+        rows as u32,
+        Box::new(source),
+    )?;
+    let format = match args.format {
+        super::FormatArg::Jpg => ImageFormat::Jpeg { quality: 90 },
+        super::FormatArg::Png => ImageFormat::Png,
+        super::FormatArg::Exr => ImageFormat::Exr,
+    };
+    io::write_ubo2003(&btf, &args.out, format, &Bar::new(global))?;
+    let seconds = start.elapsed().as_secs_f64();
+    report(
+        args.json,
+        &args.out,
+        btf.image_count(),
+        total,
+        total,
+        seconds,
+    )
+}
+
+fn report(
+    json: bool,
+    out: &std::path::Path,
+    images: usize,
+    used: usize,
+    total: usize,
+    seconds: f64,
+) -> anyhow::Result<()> {
+    if json {
+        emit(serde_json::json!({
+            "out": out,
+            "images": images,
+            "subspaces_synthesized": used,
+            "subspaces_total": total,
+            "synthesis_seconds": seconds,
+        }))
+    } else {
+        emit(format!(
+            "wrote {} ({images} image(s); {used} of {total} subspace images synthesized) in {seconds:.3} s",
+            out.display()
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_and_directions_parse() {
+        assert_eq!(parse_size("512"), Ok((512, 512)));
+        assert_eq!(parse_size("640x480"), Ok((480, 640)));
+        assert!(parse_size("x").is_err());
+        assert_eq!(
+            parse_direction("45, 90").unwrap(),
+            Direction::new(45.0, 90.0)
+        );
+        assert!(parse_direction("95,0").is_err());
+        assert!(parse_direction("45").is_err());
+    }
+}

@@ -1,0 +1,433 @@
+//! The `.btfm` model file: versioned, checksummed, little-endian, decoded with bounded
+//! allocations. The layout is documented byte by byte in `docs/FORMAT.md`.
+
+use std::path::Path;
+
+use super::material::{BandModel, LevelModel, MaterialModel, ModelKind, RangeMap, SubspaceModel};
+use super::{ModelError, Result};
+use crate::btf::{Direction, DirectionSet, io};
+use crate::decompose::KlBasis;
+use crate::mrf::neighbourhood::{MAX_ORDER, causal};
+use crate::mrf::{Car2dModel, Car3dModel, GmrfModel, car3d::MAX_ORDER_3D};
+
+/// The four bytes every model file starts with.
+pub const MAGIC: [u8; 4] = *b"BTFM";
+/// The format version this library writes and reads.
+pub const VERSION: u16 = 1;
+/// The largest payload accepted, bytes (a model is tens of kilobytes).
+pub const MAX_PAYLOAD: u32 = 16 << 20;
+/// The most pyramid levels accepted.
+pub const MAX_LEVELS: u8 = 16;
+
+struct Writer(Vec<u8>);
+
+impl Writer {
+    fn u8(&mut self, v: u8) {
+        self.0.push(v);
+    }
+    fn u16(&mut self, v: u16) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn u32(&mut self, v: u32) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn f32(&mut self, v: f64) {
+        self.0.extend_from_slice(&(v as f32).to_le_bytes());
+    }
+    fn f32s(&mut self, v: &[f64]) {
+        v.iter().for_each(|&x| self.f32(x));
+    }
+}
+
+/// Reads from a byte slice; every read checks the remaining length first.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+type Parse<T> = std::result::Result<T, String>;
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Parse<&'a [u8]> {
+        if self.bytes.len() - self.pos < n {
+            return Err(format!("truncated at byte {} (wanted {n} more)", self.pos));
+        }
+        let s = &self.bytes[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    fn u8(&mut self) -> Parse<u8> {
+        Ok(self.take(1)?[0])
+    }
+    fn u16(&mut self) -> Parse<u16> {
+        Ok(u16::from_le_bytes(
+            self.take(2)?.try_into().expect("2 bytes"),
+        ))
+    }
+    fn u32(&mut self) -> Parse<u32> {
+        Ok(u32::from_le_bytes(
+            self.take(4)?.try_into().expect("4 bytes"),
+        ))
+    }
+    fn f32(&mut self) -> Parse<f64> {
+        let v = f32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes"));
+        if v.is_finite() {
+            Ok(f64::from(v))
+        } else {
+            Err(format!("non-finite number at byte {}", self.pos - 4))
+        }
+    }
+    /// `n` floats, after checking they fit in what is left (no allocation from a bad count).
+    fn f32s(&mut self, n: usize) -> Parse<Vec<f64>> {
+        self.ensure(n, 4)?;
+        (0..n).map(|_| self.f32()).collect()
+    }
+    fn ensure(&self, count: usize, size: usize) -> Parse<()> {
+        match count.checked_mul(size) {
+            Some(b) if b <= self.bytes.len() - self.pos => Ok(()),
+            _ => Err(format!(
+                "count {count} at byte {} exceeds the file",
+                self.pos
+            )),
+        }
+    }
+    fn order(&mut self, max: usize) -> Parse<u8> {
+        let o = self.u8()?;
+        if usize::from(o) > max {
+            return Err(format!("neighbourhood order {o} exceeds {max}"));
+        }
+        Ok(o)
+    }
+}
+
+fn kind_code(kind: ModelKind) -> u8 {
+    match kind {
+        ModelKind::Gmrf => 0,
+        ModelKind::Car2d => 1,
+        ModelKind::Car3d => 2,
+    }
+}
+
+/// Serialises a model to bytes (header, payload, CRC-32 of the payload).
+pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
+    let mut w = Writer(Vec::new());
+    w.u8(kind_code(model.kind));
+    w.u32(model.width);
+    w.u32(model.height);
+    w.u8(model.levels() as u8);
+    for set in [&model.views, &model.lights] {
+        w.u16(set.len() as u16);
+        for d in set {
+            w.f32(d.theta_deg);
+            w.f32(d.phi_deg);
+        }
+    }
+    w.u16(model.subspaces.len() as u16);
+    let wide = model.subspaces.len() > 256;
+    w.u8(if wide { 2 } else { 1 });
+    for &c in &model.cluster_table {
+        if wide { w.u16(c) } else { w.u8(c as u8) }
+    }
+    for s in &model.subspaces {
+        w.u16(s.representative.0);
+        w.u16(s.representative.1);
+        w.f32s(&s.kl.mean);
+        for row in &s.kl.basis {
+            w.f32s(row);
+        }
+        for level in &s.levels {
+            match level {
+                LevelModel::Factors(bands) => {
+                    for band in bands {
+                        match band {
+                            BandModel::Car2d(m) => {
+                                write_band(&mut w, m.order, m.mean, m.sigma2, &m.gamma)
+                            }
+                            BandModel::Gmrf(m) => {
+                                write_band(&mut w, m.order, m.mean, m.sigma2, &m.gamma)
+                            }
+                        }
+                    }
+                }
+                LevelModel::Joint(m) => {
+                    w.u8(m.order);
+                    w.f32s(&m.mean);
+                    w.f32s(&m.sigma);
+                    w.f32s(&m.a);
+                }
+            }
+        }
+    }
+    match &model.range_map {
+        None => w.u8(0),
+        Some(r) => {
+            w.u8(1);
+            w.u16(r.rows as u16);
+            w.u16(r.cols as u16);
+            let (lo, hi) = r
+                .heights
+                .iter()
+                .fold((f32::MAX, f32::MIN), |(a, b), &h| (a.min(h), b.max(h)));
+            let step = if hi > lo { (hi - lo) / 65535.0 } else { 0.0 };
+            w.f32(f64::from(lo));
+            w.f32(f64::from(step));
+            for &h in &r.heights {
+                let q = if step > 0.0 {
+                    ((h - lo) / step).round()
+                } else {
+                    0.0
+                };
+                w.u16(q as u16);
+            }
+        }
+    }
+    let payload = w.0;
+    let mut out = Vec::with_capacity(payload.len() + 16);
+    out.extend_from_slice(&MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&0u16.to_le_bytes());
+    out.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+    out.extend_from_slice(&payload);
+    out.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
+    out
+}
+
+fn write_band(w: &mut Writer, order: u8, mean: f64, sigma2: f64, gamma: &[f64]) {
+    w.u8(order);
+    w.f32(mean);
+    w.f32(sigma2);
+    w.f32s(gamma);
+}
+
+/// Parses a model from bytes; `path` is only used in messages.
+///
+/// # Errors
+/// [`ModelError::Format`] for a wrong magic, version, size or checksum, a truncated or
+/// inconsistent payload, or out-of-range values. Nothing is allocated beyond what the bytes
+/// can actually hold.
+pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<MaterialModel> {
+    parse(bytes).map_err(|reason| ModelError::Format {
+        path: path.to_path_buf(),
+        reason,
+    })
+}
+
+fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
+    let mut header = Reader { bytes, pos: 0 };
+    if header
+        .take(4)
+        .map_err(|_| "not a .btfm model (too short)".to_string())?
+        != MAGIC
+    {
+        return Err("not a .btfm model (wrong magic bytes)".into());
+    }
+    let version = header.u16()?;
+    if version != VERSION {
+        return Err(format!(
+            "format version {version}; this build reads version {VERSION}"
+        ));
+    }
+    let _flags = header.u16()?;
+    let len = header.u32()?;
+    if len > MAX_PAYLOAD {
+        return Err(format!(
+            "payload of {len} bytes exceeds the {MAX_PAYLOAD}-byte limit"
+        ));
+    }
+    let payload = header.take(len as usize)?;
+    let crc = header.u32()?;
+    if crc != crc32fast::hash(payload) {
+        return Err("checksum mismatch: the file is corrupt".into());
+    }
+    if header.pos != bytes.len() {
+        return Err(format!(
+            "{} unexpected bytes after the checksum",
+            bytes.len() - header.pos
+        ));
+    }
+    let mut r = Reader {
+        bytes: payload,
+        pos: 0,
+    };
+    let kind = match r.u8()? {
+        0 => ModelKind::Gmrf,
+        1 => ModelKind::Car2d,
+        2 => ModelKind::Car3d,
+        k => return Err(format!("unknown model kind {k}")),
+    };
+    let (width, height) = (r.u32()?, r.u32()?);
+    if width == 0
+        || height == 0
+        || width > crate::btf::io::image::MAX_SIDE
+        || height > crate::btf::io::image::MAX_SIDE
+    {
+        return Err(format!("image size {width}x{height} out of range"));
+    }
+    let levels = r.u8()?;
+    if levels == 0 || levels > MAX_LEVELS {
+        return Err(format!(
+            "{levels} pyramid levels (1..={MAX_LEVELS} accepted)"
+        ));
+    }
+    let mut sets = Vec::new();
+    for _ in 0..2 {
+        let n = usize::from(r.u16()?);
+        r.ensure(n, 8)?;
+        let dirs = (0..n)
+            .map(|_| Ok(Direction::new(r.f32()?, r.f32()?)))
+            .collect::<Parse<Vec<_>>>()?;
+        sets.push(DirectionSet::new(dirs).map_err(|e| e.to_string())?);
+    }
+    let lights = sets.pop().expect("two sets");
+    let views = sets.pop().expect("two sets");
+    let clusters = usize::from(r.u16()?);
+    if clusters == 0 {
+        return Err("no subspace models".into());
+    }
+    let entry = usize::from(r.u8()?);
+    if entry != 1 && entry != 2 {
+        return Err(format!("cluster table entry size {entry}"));
+    }
+    let pairs = views.len() * lights.len();
+    r.ensure(pairs, entry)?;
+    let cluster_table = (0..pairs)
+        .map(|_| {
+            let c = if entry == 1 {
+                u16::from(r.u8()?)
+            } else {
+                r.u16()?
+            };
+            if usize::from(c) >= clusters {
+                return Err(format!("cluster table names cluster {c} of {clusters}"));
+            }
+            Ok(c)
+        })
+        .collect::<Parse<Vec<u16>>>()?;
+    // Every subspace needs at least its header: bound the count by the bytes left.
+    r.ensure(clusters, 4 + 48 + usize::from(levels))?;
+    let mut subspaces = Vec::with_capacity(clusters);
+    for _ in 0..clusters {
+        let representative = (r.u16()?, r.u16()?);
+        if usize::from(representative.0) >= views.len()
+            || usize::from(representative.1) >= lights.len()
+        {
+            return Err(format!(
+                "representative {representative:?} outside the direction sets"
+            ));
+        }
+        let mean: [f64; 3] = r.f32s(3)?.try_into().expect("3");
+        let b = r.f32s(9)?;
+        let kl = KlBasis {
+            mean,
+            basis: std::array::from_fn(|i| std::array::from_fn(|j| b[3 * i + j])),
+            variances: [0.0; 3],
+        };
+        let mut level_models = Vec::with_capacity(usize::from(levels));
+        for _ in 0..levels {
+            level_models.push(match kind {
+                ModelKind::Car3d => {
+                    let order = r.order(MAX_ORDER_3D)?;
+                    let mean: [f64; 3] = r.f32s(3)?.try_into().expect("3");
+                    let sigma: [f64; 9] = r.f32s(9)?.try_into().expect("9");
+                    let a = r.f32s(9 * causal(usize::from(order)).len())?;
+                    LevelModel::Joint(Car3dModel {
+                        order,
+                        a,
+                        sigma,
+                        mean,
+                    })
+                }
+                _ => {
+                    let band = |r: &mut Reader| -> Parse<BandModel> {
+                        let order = r.order(MAX_ORDER)?;
+                        let (mean, sigma2) = (r.f32()?, r.f32()?);
+                        if sigma2 < 0.0 {
+                            return Err(format!("negative noise variance {sigma2}"));
+                        }
+                        let gamma = r.f32s(causal(usize::from(order)).len())?;
+                        Ok(if kind == ModelKind::Gmrf {
+                            BandModel::Gmrf(GmrfModel {
+                                order,
+                                gamma,
+                                sigma2,
+                                mean,
+                            })
+                        } else {
+                            BandModel::Car2d(Car2dModel {
+                                order,
+                                gamma,
+                                sigma2,
+                                mean,
+                            })
+                        })
+                    };
+                    LevelModel::Factors([band(&mut r)?, band(&mut r)?, band(&mut r)?])
+                }
+            });
+        }
+        subspaces.push(SubspaceModel {
+            representative,
+            kl,
+            levels: level_models,
+        });
+    }
+    let range_map = match r.u8()? {
+        0 => None,
+        1 => {
+            let (rows, cols) = (usize::from(r.u16()?), usize::from(r.u16()?));
+            if rows == 0 || cols == 0 {
+                return Err("empty range map".into());
+            }
+            let (lo, step) = (r.f32()?, r.f32()?);
+            r.ensure(rows * cols, 2)?;
+            let heights = (0..rows * cols)
+                .map(|_| Ok((lo + step * f64::from(r.u16()?)) as f32))
+                .collect::<Parse<Vec<f32>>>()?;
+            Some(RangeMap {
+                heights,
+                rows,
+                cols,
+            })
+        }
+        f => return Err(format!("unknown range map flag {f}")),
+    };
+    if r.pos != payload.len() {
+        return Err(format!(
+            "{} unexplained bytes at the end of the payload",
+            payload.len() - r.pos
+        ));
+    }
+    Ok(MaterialModel {
+        kind,
+        views,
+        lights,
+        width,
+        height,
+        cluster_table,
+        subspaces,
+        range_map,
+    })
+}
+
+/// Writes a model file atomically.
+///
+/// # Errors
+/// The destination cannot be written.
+pub fn write(model: &MaterialModel, path: &Path) -> Result<()> {
+    Ok(io::write_file_atomic(path, &to_bytes(model))?)
+}
+
+/// Reads a model file (at most [`MAX_PAYLOAD`] + 16 bytes are read).
+///
+/// # Errors
+/// The file cannot be read, or is not a valid model.
+pub fn read(path: &Path) -> Result<MaterialModel> {
+    use std::io::Read;
+    let io_error = |e| ModelError::Btf(crate::btf::BtfError::io(path, e));
+    let file = std::fs::File::open(path).map_err(io_error)?;
+    let mut bytes = Vec::new();
+    file.take(u64::from(MAX_PAYLOAD) + 17)
+        .read_to_end(&mut bytes)
+        .map_err(io_error)?;
+    from_bytes(&bytes, path)
+}

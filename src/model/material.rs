@@ -1,0 +1,125 @@
+//! The material model: everything needed to synthesize a BTF, a few tens of kilobytes.
+
+use crate::btf::DirectionSet;
+use crate::decompose::KlBasis;
+use crate::mrf::{Car2dModel, Car3dModel, GmrfModel};
+
+/// Which MRF models the bands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum ModelKind {
+    /// Gaussian MRF per KL factor and pyramid level (exactly tileable synthesis by FFT).
+    Gmrf,
+    /// 2D causal autoregressive model per KL factor and pyramid level.
+    Car2d,
+    /// 3D causal autoregressive model per pyramid level on the colour channels jointly.
+    Car3d,
+}
+
+impl ModelKind {
+    /// Every kind, in file-code order.
+    pub const ALL: [ModelKind; 3] = [ModelKind::Gmrf, ModelKind::Car2d, ModelKind::Car3d];
+
+    /// The name on the command line and in reports.
+    pub fn name(&self) -> &'static str {
+        match self {
+            ModelKind::Gmrf => "gmrf",
+            ModelKind::Car2d => "2dcar",
+            ModelKind::Car3d => "3dcar",
+        }
+    }
+}
+
+impl std::str::FromStr for ModelKind {
+    type Err = super::ModelError;
+    fn from_str(s: &str) -> super::Result<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| {
+                super::ModelError::parameter(
+                    "--model",
+                    format!("'{s}' is not gmrf, 2dcar or 3dcar"),
+                )
+            })
+    }
+}
+
+impl std::fmt::Display for ModelKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A mono-spectral band model.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BandModel {
+    /// A 2D CAR band.
+    Car2d(Car2dModel),
+    /// A GMRF band.
+    Gmrf(GmrfModel),
+}
+
+/// The model of one pyramid level of one subspace image.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LevelModel {
+    /// One model per KL factor (2D CAR, GMRF).
+    Factors([BandModel; 3]),
+    /// One joint colour model (3D CAR).
+    Joint(Car3dModel),
+}
+
+/// The model of one subspace image (one cluster of the view x light space).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SubspaceModel {
+    /// (view, light) of the measured image that represents the cluster.
+    pub representative: (u16, u16),
+    /// The colour basis (identity for the 3D CAR, which needs none).
+    pub kl: KlBasis,
+    /// Level models, finest first.
+    pub levels: Vec<LevelModel>,
+}
+
+/// A range map (height field) tile, for bump or displacement mapping; tiled periodically when
+/// a larger one is needed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RangeMap {
+    /// Heights in texels of the measured image, shape (rows, cols), row-major.
+    pub heights: Vec<f32>,
+    /// Rows of the tile.
+    pub rows: usize,
+    /// Columns of the tile.
+    pub cols: usize,
+}
+
+/// A whole material: clustering, subspace models and range map. Written as `.btfm`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MaterialModel {
+    /// The band model family.
+    pub kind: ModelKind,
+    /// The measured view directions.
+    pub views: DirectionSet,
+    /// The measured light directions.
+    pub lights: DirectionSet,
+    /// Width of the measured images, pixels.
+    pub width: u32,
+    /// Height of the measured images, pixels.
+    pub height: u32,
+    /// Cluster of every measured (view, light), view-major.
+    pub cluster_table: Vec<u16>,
+    /// One model per cluster.
+    pub subspaces: Vec<SubspaceModel>,
+    /// The surface relief, if estimated.
+    pub range_map: Option<RangeMap>,
+}
+
+impl MaterialModel {
+    /// Number of pyramid levels.
+    pub fn levels(&self) -> usize {
+        self.subspaces.first().map_or(0, |s| s.levels.len())
+    }
+
+    /// The cluster of measured pair (view, light).
+    pub fn cluster_of(&self, view: usize, light: usize) -> usize {
+        usize::from(self.cluster_table[view * self.lights.len() + light])
+    }
+}

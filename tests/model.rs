@@ -1,0 +1,234 @@
+//! The MRF model end to end through the public API and the CLI: analyze -> .btfm ->
+//! synthesize, model files that round-trip, and hostile model files that are refused.
+
+mod common;
+
+use std::path::Path;
+use std::sync::OnceLock;
+
+use btfmrf::analysis::{AnalysisOptions, analyze};
+use btfmrf::btf::synthetic::SyntheticMaterial;
+use btfmrf::btf::{Btf, Direction};
+use btfmrf::model::{MaterialModel, ModelError, ModelKind, format};
+use btfmrf::progress::NoProgress;
+use btfmrf::synthesis::SynthesisOptions;
+use common::*;
+
+/// One fitted model per kind of a 32x32 stones BTF (fitted once for all tests).
+fn models() -> &'static Vec<MaterialModel> {
+    static MODELS: OnceLock<Vec<MaterialModel>> = OnceLock::new();
+    MODELS.get_or_init(|| {
+        let btf = Btf::synthetic(SyntheticMaterial::Stones, 32, 4).unwrap();
+        ModelKind::ALL
+            .iter()
+            .map(|&kind| {
+                let options = AnalysisOptions {
+                    kind,
+                    clusters: 8,
+                    ..AnalysisOptions::default()
+                };
+                analyze(&btf, &options, &NoProgress).unwrap().0
+            })
+            .collect()
+    })
+}
+
+fn opts(size: usize, seed: u64) -> SynthesisOptions {
+    SynthesisOptions {
+        rows: size,
+        cols: size,
+        seed,
+        tileable: false,
+    }
+}
+
+#[test]
+fn model_files_round_trip_and_are_small() {
+    for m in models() {
+        assert_eq!(m.subspaces.len(), 8);
+        assert_eq!(m.cluster_table.len(), 6561);
+        let bytes = format::to_bytes(m);
+        assert!(
+            bytes.len() < 150 * 1024,
+            "{}: {} bytes",
+            m.kind,
+            bytes.len()
+        );
+        let back = format::from_bytes(&bytes, Path::new("m.btfm")).unwrap();
+        assert_eq!(back.kind, m.kind);
+        assert_eq!(back.cluster_table, m.cluster_table);
+        // Stored as f32: a second round trip is exact.
+        assert_eq!(format::to_bytes(&back), bytes);
+    }
+}
+
+#[test]
+fn synthesis_is_seed_deterministic_any_size_and_lazy() {
+    for m in models() {
+        let (v, l) = (Direction::new(0.0, 0.0), Direction::new(45.0, 90.0));
+        let a = m.synthesize_image(&v, &l, &opts(96, 5)).unwrap();
+        let b = m.synthesize_image(&v, &l, &opts(96, 5)).unwrap();
+        let c = m.synthesize_image(&v, &l, &opts(96, 6)).unwrap();
+        assert_eq!(a, b, "{}", m.kind);
+        assert_ne!(a, c, "{}", m.kind);
+        assert!(a.iter().all(|x| x.is_finite()));
+        let odd = m.synthesize_image(&v, &l, &opts(37, 5)).unwrap();
+        assert_eq!(odd.dim(), (3, 37, 37));
+        // At most 9 measured pairs feed one image, so at most 9 subspaces are synthesized.
+        assert!(m.subspace_weights(&v, &l).unwrap().len() <= 9);
+        assert!(m.synthesize_image(&v, &l, &opts(0, 1)).is_err());
+    }
+}
+
+#[test]
+fn tileable_synthesis_needs_a_divisible_size() {
+    let m = &models()[0];
+    let mut o = opts(64, 1);
+    o.tileable = true;
+    assert!(m.synthesize_subspace(0, &o).is_ok());
+    o.rows = 63;
+    assert!(matches!(
+        m.synthesize_subspace(0, &o),
+        Err(ModelError::InvalidParameter { .. })
+    ));
+}
+
+#[test]
+fn hostile_model_files_are_refused_without_panic() {
+    let bytes = format::to_bytes(&models()[1]);
+    let p = Path::new("hostile.btfm");
+    // Every truncation.
+    for len in (0..bytes.len()).step_by(97) {
+        assert!(
+            format::from_bytes(&bytes[..len], p).is_err(),
+            "prefix {len}"
+        );
+    }
+    // Any flipped byte breaks the checksum (or the header).
+    for pos in (0..bytes.len()).step_by(131) {
+        let mut bad = bytes.clone();
+        bad[pos] ^= 0x5a;
+        assert!(format::from_bytes(&bad, p).is_err(), "flip at {pos}");
+    }
+    // Payloads with valid checksums but absurd contents: huge counts, bad orders, garbage.
+    let mut state = 0x1234_5678u64;
+    for _ in 0..300 {
+        let mut payload = bytes[12..bytes.len() - 4].to_vec();
+        for _ in 0..4 {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let pos = (state >> 33) as usize % payload.len();
+            payload[pos] = (state >> 20) as u8;
+        }
+        let mut file = bytes[..8].to_vec();
+        file.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+        file.extend_from_slice(&payload);
+        file.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
+        let _ = format::from_bytes(&file, p); // must return, Ok or Err, without panicking
+    }
+    let mut wrong_version = bytes.clone();
+    wrong_version[4] = 9;
+    let e = format::from_bytes(&wrong_version, p)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("version 9"), "{e}");
+}
+
+#[test]
+fn cli_analyze_and_synthesize() {
+    let dir = temp();
+    let zip = dir.path().join("k.zip");
+    ok(&[
+        "generate",
+        "knit",
+        "--size",
+        "32",
+        "--out",
+        s(&zip),
+        "--quiet",
+    ]);
+    let model = dir.path().join("k.btfm");
+    let out = ok(&[
+        "analyze",
+        s(&zip),
+        "--model",
+        "gmrf",
+        "--clusters",
+        "6",
+        "--out",
+        s(&model),
+        "--json",
+        "--quiet",
+    ]);
+    let report: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let bytes = std::fs::metadata(&model).unwrap().len();
+    assert_eq!(report["model_bytes"], bytes);
+    assert_eq!(report["clusters"], 6);
+    assert_eq!(report["raw_bytes"], 6561 * 32 * 32 * 3);
+    let ratio = report["compression_ratio"].as_f64().unwrap();
+    assert!((ratio - (6561.0 * 32.0 * 32.0 * 3.0) / bytes as f64).abs() < 1e-6);
+    assert!(report["analysis_seconds"].as_f64().unwrap() > 0.0);
+
+    let png = dir.path().join("one.png");
+    let args = [
+        "synthesize",
+        s(&model),
+        "--size",
+        "64",
+        "--view",
+        "0,0",
+        "--light",
+        "30,45",
+        "--out",
+        s(&png),
+        "--seed",
+        "2",
+    ];
+    ok(&args);
+    let first = std::fs::read(&png).unwrap();
+    ok(&args);
+    assert_eq!(std::fs::read(&png).unwrap(), first, "same seed, same bytes");
+    let decoded = image::load_from_memory(&first).unwrap();
+    assert_eq!((decoded.width(), decoded.height()), (64, 64));
+
+    let err = fails(&["synthesize", s(&model), "--size", "64", "--out", s(&png)]);
+    assert!(err.contains("exactly one --view and one --light"), "{err}");
+    let set = dir.path().join("set.zip");
+    ok(&[
+        "synthesize",
+        s(&model),
+        "--size",
+        "16",
+        "--view",
+        "0,0",
+        "--view",
+        "45,0",
+        "--light",
+        "30,90",
+        "--out",
+        s(&set),
+        "--quiet",
+    ]);
+    let info: serde_json::Value = serde_json::from_str(&ok(&["info", s(&set), "--json"])).unwrap();
+    assert_eq!(
+        (info["views"].clone(), info["lights"].clone()),
+        (2.into(), 1.into())
+    );
+
+    let junk = dir.path().join("junk.btfm");
+    std::fs::write(&junk, b"BTFM\x01\x00\x00\x00\xff\xff\xff\x7f").unwrap();
+    let err = fails(&[
+        "synthesize",
+        s(&junk),
+        "--size",
+        "8",
+        "--view",
+        "0,0",
+        "--light",
+        "0,0",
+        "--out",
+        s(&png),
+    ]);
+    assert!(err.contains("junk.btfm"), "{err}");
+}
