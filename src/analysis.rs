@@ -6,10 +6,12 @@ use ndarray::{Array3, Axis, stack};
 use rayon::prelude::*;
 
 use crate::btf::Btf;
+use crate::decompose::marginals;
 use crate::decompose::pyramid::auto_levels;
 use crate::decompose::{ClusterOptions, KlBasis, Pyramid, SubspaceClustering};
+use crate::geometry;
 use crate::model::{
-    BandModel, LevelModel, MaterialModel, ModelError, ModelKind, Result, SubspaceModel,
+    BandModel, LevelModel, MaterialModel, ModelError, ModelKind, RangeMap, Result, SubspaceModel,
 };
 use crate::mrf::{
     Car2dModel, Car3dModel, GmrfModel, car3d::MAX_ORDER_3D, neighbourhood::MAX_ORDER,
@@ -30,7 +32,14 @@ pub struct AnalysisOptions {
     pub max_order: usize,
     /// Seed of the clustering. Default: 1.
     pub seed: u64,
+    /// Estimate a range map by photometric stereo (needs 3 or more usable lights in the
+    /// frontal view). Default: true.
+    pub range_map: bool,
 }
+
+/// Largest stored range-map side, samples; larger maps are averaged down (a 128 x 128 map is
+/// 32 KiB in the model file).
+pub const RANGE_MAP_MAX_SIDE: usize = 128;
 
 impl Default for AnalysisOptions {
     fn default() -> Self {
@@ -40,6 +49,7 @@ impl Default for AnalysisOptions {
             levels: None,
             max_order: MAX_ORDER,
             seed: 1,
+            range_map: true,
         }
     }
 }
@@ -97,6 +107,7 @@ pub fn analyze(
         .map(|(k, &(v, l))| {
             let image = btf.image(v, l)?;
             let (kl, levels, notes) = fit_subspace(&image, options.kind, levels, options.max_order);
+            let marginals = kl.forward(&image).map(|plane| marginals::quantiles(&plane));
             progress.advance(1);
             let notes = notes
                 .into_iter()
@@ -106,6 +117,7 @@ pub fn analyze(
                 SubspaceModel {
                     representative: (v as u16, l as u16),
                     kl,
+                    marginals,
                     levels,
                 },
                 notes,
@@ -114,6 +126,17 @@ pub fn analyze(
         .collect::<Result<_>>()?;
     progress.finish();
     let mut report = AnalysisReport::default();
+    let range_map = if options.range_map {
+        match estimate_range_map(btf, progress) {
+            Ok(map) => Some(map),
+            Err(e) => {
+                report.repairs.push(format!("no range map: {e}"));
+                None
+            }
+        }
+    } else {
+        None
+    };
     let mut subspaces = Vec::with_capacity(fitted.len());
     for (s, notes) in fitted {
         subspaces.push(s);
@@ -127,9 +150,28 @@ pub fn analyze(
         height: btf.height(),
         cluster_table: clustering.labels,
         subspaces,
-        range_map: None,
+        range_map,
     };
     Ok((model, report))
+}
+
+/// Photometric stereo on the frontal view, Frankot-Chellappa integration, and averaging down to
+/// at most [`RANGE_MAP_MAX_SIDE`] samples a side.
+fn estimate_range_map(
+    btf: &Btf,
+    progress: &dyn Progress,
+) -> std::result::Result<RangeMap, crate::btf::BtfError> {
+    let normals = geometry::estimate_normals(btf, geometry::frontal_view(btf), progress)?;
+    let heights = geometry::frankot_chellappa(&normals.normals);
+    let (h, w) = heights.dim();
+    let step = h.max(w).div_ceil(RANGE_MAP_MAX_SIDE).max(1);
+    let tile = geometry::downsample(&heights, step);
+    Ok(RangeMap {
+        rows: tile.nrows(),
+        cols: tile.ncols(),
+        heights: tile.iter().map(|&v| v as f32).collect(),
+        step,
+    })
 }
 
 /// Fits one subspace image: its colour basis (the identity for the 3D CAR), its level

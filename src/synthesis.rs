@@ -13,6 +13,7 @@ use ndarray::{Array2, Array3, Axis};
 use rayon::prelude::*;
 
 use crate::btf::{Direction, Weighted};
+use crate::decompose::marginals::match_marginal;
 use crate::decompose::{Border, Pyramid};
 use crate::model::{BandModel, LevelModel, MaterialModel, ModelError, Result};
 
@@ -127,6 +128,10 @@ impl MaterialModel {
                 })
             }
         };
+        let mut factors = factors;
+        for (plane, target) in factors.iter_mut().zip(&s.marginals) {
+            match_marginal(plane, target);
+        }
         Ok(s.kl.inverse(&factors))
     }
 
@@ -178,7 +183,8 @@ impl MaterialModel {
     }
 
     /// The BTF image for (view, light): the subspace images of the nearest measured pairs,
-    /// blended by their barycentric weights. Only those subspaces are synthesized.
+    /// blended by their barycentric weights, then relit by bump mapping with the range map
+    /// (when the model has one). Only the subspaces needed are synthesized.
     ///
     /// # Errors
     /// A non-finite direction or an invalid size.
@@ -197,7 +203,56 @@ impl MaterialModel {
         for (w, part) in parts {
             out.scaled_add(w as f32, &part);
         }
+        if let Some(normals) = self.range_normals(o.rows, o.cols) {
+            bump_relight(&mut out, &normals, light);
+        }
         Ok(out)
+    }
+
+    /// The range map over `rows` x `cols` output texels (mirror-tiled, bilinearly upsampled from
+    /// the stored tile), in texels; `None` without a range map.
+    pub fn range_heights(&self, rows: usize, cols: usize) -> Option<Array2<f64>> {
+        let map = self.range_map.as_ref()?;
+        let (n_r, n_c, step) = (map.rows as isize, map.cols as isize, map.step as f64);
+        let fold = |i: isize, n: isize| {
+            let m = i.rem_euclid(2 * n);
+            (if m < n { m } else { 2 * n - 1 - m }) as usize
+        };
+        let at =
+            |r: isize, c: isize| f64::from(map.heights[fold(r, n_r) * map.cols + fold(c, n_c)]);
+        Some(Array2::from_shape_fn((rows, cols), |(y, x)| {
+            let (u, v) = ((x as f64 + 0.5) / step - 0.5, (y as f64 + 0.5) / step - 0.5);
+            let (c0, r0) = (u.floor(), v.floor());
+            let (fx, fy) = (u - c0, v - r0);
+            let (c0, r0) = (c0 as isize, r0 as isize);
+            let top = at(r0, c0) * (1.0 - fx) + at(r0, c0 + 1) * fx;
+            let bottom = at(r0 + 1, c0) * (1.0 - fx) + at(r0 + 1, c0 + 1) * fx;
+            top * (1.0 - fy) + bottom * fy
+        }))
+    }
+
+    /// Unit normals of [`MaterialModel::range_heights`], shape (3, rows, cols).
+    pub fn range_normals(&self, rows: usize, cols: usize) -> Option<Array3<f64>> {
+        self.range_heights(rows, cols)
+            .map(|h| crate::geometry::normals_of(&h))
+    }
+}
+
+/// Bump mapping (mrf_math.md 1(g)): multiplies an image by `max(0, n . l) / mean(max(0, n . l))`.
+/// Dividing by the mean keeps the subspace image's own average shading from being applied
+/// twice. Lights so low that almost nothing is lit leave the image as it is.
+pub fn bump_relight(image: &mut Array3<f32>, normals: &Array3<f64>, light: &Direction) {
+    let l = light.vector();
+    let (_, h, w) = normals.dim();
+    let shade = Array2::from_shape_fn((h, w), |(y, x)| {
+        (normals[[0, y, x]] * l[0] + normals[[1, y, x]] * l[1] + normals[[2, y, x]] * l[2]).max(0.0)
+    });
+    let mean = shade.sum() / shade.len().max(1) as f64;
+    if mean < 1e-3 {
+        return;
+    }
+    for mut channel in image.axis_iter_mut(Axis(0)) {
+        channel.zip_mut_with(&shade, |v, s| *v *= (s / mean) as f32);
     }
 }
 

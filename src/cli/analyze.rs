@@ -41,6 +41,10 @@ pub struct Args {
     /// Seed of the clustering.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Do not estimate a range map (photometric stereo on the frontal view); synthesized
+    /// images are then not relit by bump mapping.
+    #[arg(long)]
+    no_range_map: bool,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
     /// clusters, levels, repairs.
     #[arg(long)]
@@ -59,6 +63,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         levels: args.levels,
         max_order: args.max_order,
         seed: args.seed,
+        range_map: !args.no_range_map,
     };
     let (model, report) = analyze(&btf, &options, &Bar::new(global))?;
     let seconds = start.elapsed().as_secs_f64();
@@ -74,6 +79,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             "compression_ratio": ratio,
             "clusters": model.subspaces.len(),
             "levels": model.levels(),
+            "range_map": model.range_map.as_ref().map(|r| serde_json::json!({"rows": r.rows, "cols": r.cols, "step": r.step})),
             "repairs": report.repairs,
         }))?;
     } else {

@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use btfmrf::btf::{Btf, BtfError, Direction, DirectionSet, ImageFormat, ImageSource, io};
 use btfmrf::model::{MaterialModel, format};
-use btfmrf::synthesis::SynthesisOptions;
+use btfmrf::synthesis::{SynthesisOptions, bump_relight};
 use ndarray::Array3;
 
 use super::{Bar, Global, emit};
@@ -93,6 +93,7 @@ struct ModelSource {
     views: DirectionSet,
     lights: DirectionSet,
     subspaces: Vec<OnceLock<Result<Array3<f32>, String>>>,
+    normals: Option<Array3<f64>>,
 }
 
 impl ImageSource for ModelSource {
@@ -117,6 +118,9 @@ impl ImageSource for ModelSource {
                 .as_ref()
                 .map_err(|e| fail(e.clone()))?;
             out.scaled_add(w as f32, part);
+        }
+        if let Some(n) = &self.normals {
+            bump_relight(&mut out, n, &l);
         }
         Ok(out)
     }
@@ -179,6 +183,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let total = model.subspaces.len();
     let source = ModelSource {
         subspaces: (0..total).map(|_| OnceLock::new()).collect(),
+        normals: model.range_normals(rows, cols),
         model,
         options,
         views: views.clone(),

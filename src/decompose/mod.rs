@@ -3,6 +3,7 @@
 
 pub mod cluster;
 pub mod kl;
+pub mod marginals;
 pub mod pyramid;
 
 pub use cluster::{ClusterOptions, SubspaceClustering};

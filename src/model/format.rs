@@ -7,6 +7,7 @@ use super::material::{BandModel, LevelModel, MaterialModel, ModelKind, RangeMap,
 use super::{ModelError, Result};
 use crate::btf::{Direction, DirectionSet, io};
 use crate::decompose::KlBasis;
+use crate::decompose::marginals::QUANTILES;
 use crate::mrf::neighbourhood::{MAX_ORDER, causal};
 use crate::mrf::{Car2dModel, Car3dModel, GmrfModel, car3d::MAX_ORDER_3D};
 
@@ -135,6 +136,9 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
         for row in &s.kl.basis {
             w.f32s(row);
         }
+        for q in &s.marginals {
+            w.f32s(q);
+        }
         for level in &s.levels {
             match level {
                 LevelModel::Factors(bands) => {
@@ -164,6 +168,7 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
             w.u8(1);
             w.u16(r.rows as u16);
             w.u16(r.cols as u16);
+            w.u16(r.step as u16);
             let (lo, hi) = r
                 .heights
                 .iter()
@@ -304,7 +309,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         })
         .collect::<Parse<Vec<u16>>>()?;
     // Every subspace needs at least its header: bound the count by the bytes left.
-    r.ensure(clusters, 4 + 48 + usize::from(levels))?;
+    r.ensure(clusters, 4 + 48 + 12 * QUANTILES + usize::from(levels))?;
     let mut subspaces = Vec::with_capacity(clusters);
     for _ in 0..clusters {
         let representative = (r.u16()?, r.u16()?);
@@ -322,6 +327,14 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             basis: std::array::from_fn(|i| std::array::from_fn(|j| b[3 * i + j])),
             variances: [0.0; 3],
         };
+        let mut marginals = [[0.0; QUANTILES]; 3];
+        for table in &mut marginals {
+            let q = r.f32s(QUANTILES)?;
+            if q.windows(2).any(|w| w[1] < w[0]) {
+                return Err("quantile table is not increasing".into());
+            }
+            table.copy_from_slice(&q);
+        }
         let mut level_models = Vec::with_capacity(usize::from(levels));
         for _ in 0..levels {
             level_models.push(match kind {
@@ -368,6 +381,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         subspaces.push(SubspaceModel {
             representative,
             kl,
+            marginals,
             levels: level_models,
         });
     }
@@ -375,18 +389,20 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         0 => None,
         1 => {
             let (rows, cols) = (usize::from(r.u16()?), usize::from(r.u16()?));
-            if rows == 0 || cols == 0 {
+            let step = usize::from(r.u16()?);
+            if rows == 0 || cols == 0 || step == 0 {
                 return Err("empty range map".into());
             }
-            let (lo, step) = (r.f32()?, r.f32()?);
+            let (lo, quantum) = (r.f32()?, r.f32()?);
             r.ensure(rows * cols, 2)?;
             let heights = (0..rows * cols)
-                .map(|_| Ok((lo + step * f64::from(r.u16()?)) as f32))
+                .map(|_| Ok((lo + quantum * f64::from(r.u16()?)) as f32))
                 .collect::<Parse<Vec<f32>>>()?;
             Some(RangeMap {
                 heights,
                 rows,
                 cols,
+                step,
             })
         }
         f => return Err(format!("unknown range map flag {f}")),

@@ -2,6 +2,7 @@
 
 use crate::btf::DirectionSet;
 use crate::decompose::KlBasis;
+use crate::decompose::marginals::Quantiles;
 use crate::mrf::{Car2dModel, Car3dModel, GmrfModel};
 
 /// Which MRF models the bands.
@@ -75,20 +76,27 @@ pub struct SubspaceModel {
     pub representative: (u16, u16),
     /// The colour basis (identity for the 3D CAR, which needs none).
     pub kl: KlBasis,
+    /// Quantiles of the three factor planes (KL factors, or RGB for the 3D CAR) of the
+    /// measured image, for marginal matching after synthesis.
+    pub marginals: [Quantiles; 3],
     /// Level models, finest first.
     pub levels: Vec<LevelModel>,
 }
 
-/// A range map (height field) tile, for bump or displacement mapping; tiled periodically when
-/// a larger one is needed.
+/// A range map (height field) tile for bump or displacement mapping, estimated by photometric
+/// stereo. It covers the measured image; larger areas are covered by mirror tiling (heights stay
+/// continuous across tile borders).
 #[derive(Debug, Clone, PartialEq)]
 pub struct RangeMap {
-    /// Heights in texels of the measured image, shape (rows, cols), row-major.
+    /// Heights in texels of the measured image, row-major, `rows * cols` samples.
     pub heights: Vec<f32>,
-    /// Rows of the tile.
+    /// Rows of the stored tile.
     pub rows: usize,
-    /// Columns of the tile.
+    /// Columns of the stored tile.
     pub cols: usize,
+    /// Measured texels per stored sample (1 = full resolution; larger maps are averaged down
+    /// to keep models small).
+    pub step: usize,
 }
 
 /// A whole material: clustering, subspace models and range map. Written as `.btfm`.

@@ -1,0 +1,5 @@
+//! Evaluation: measures of how well a model reproduces a material.
+
+pub mod metrics;
+
+pub use metrics::{Fidelity, TextureStats, texture_fidelity};

@@ -1,0 +1,131 @@
+//! From normals to a range map (height field): Frankot-Chellappa integration, the
+//! least-squares projection of a gradient field onto integrable surfaces, computed with FFTs on
+//! the mirror-padded field (mrf_math.md 1(b)).
+
+use ndarray::{Array2, Array3, s};
+use rustfft::num_complex::Complex64;
+
+use crate::fft;
+
+/// Heights (texel units, minimum 0) whose gradients best match the normals' in least squares.
+///
+/// `normals` is (3, h, w) with x right, y up in the image and z out of the surface; pixels with
+/// `n_z` near 0 get zero gradient. The field is mirrored to (2h, 2w) before the FFT so that the
+/// integration does not wrap one border into the other.
+pub fn frankot_chellappa(normals: &Array3<f64>) -> Array2<f64> {
+    let (_, h, w) = normals.dim();
+    // Gradients along columns (x) and rows (down = -y).
+    let (mut gx, mut gr) = (Array2::<f64>::zeros((h, w)), Array2::<f64>::zeros((h, w)));
+    for y in 0..h {
+        for x in 0..w {
+            let nz = normals[[2, y, x]];
+            if nz > 1e-3 {
+                gx[[y, x]] = -normals[[0, y, x]] / nz;
+                gr[[y, x]] = normals[[1, y, x]] / nz;
+            }
+        }
+    }
+    // Mirror-pad: reflecting across a vertical line negates the x gradient, across a
+    // horizontal line the row gradient.
+    let pad = |g: &Array2<f64>, flip_x: f64, flip_r: f64| {
+        Array2::from_shape_fn((2 * h, 2 * w), |(y, x)| {
+            let (yy, sy) = if y < h {
+                (y, 1.0)
+            } else {
+                (2 * h - 1 - y, flip_r)
+            };
+            let (xx, sx) = if x < w {
+                (x, 1.0)
+            } else {
+                (2 * w - 1 - x, flip_x)
+            };
+            g[[yy, xx]] * sy * sx
+        })
+    };
+    let (px, pr) = (pad(&gx, -1.0, 1.0), pad(&gr, 1.0, -1.0));
+    let (fx, fr) = (fft::forward(&px), fft::forward(&pr));
+    let (hh, ww) = (2 * h, 2 * w);
+    let tau = 2.0 * std::f64::consts::PI;
+    let freq = |k: usize, n: usize| {
+        let k = if k <= n / 2 {
+            k as f64
+        } else {
+            k as f64 - n as f64
+        };
+        tau * k / n as f64
+    };
+    let spectrum = Array2::from_shape_fn((hh, ww), |(kr, kc)| {
+        let (wr, wc) = (freq(kr, hh), freq(kc, ww));
+        let denom = wr * wr + wc * wc;
+        if denom == 0.0 {
+            Complex64::new(0.0, 0.0)
+        } else {
+            let i = Complex64::new(0.0, 1.0);
+            (-i * wc * fx[[kr, kc]] - i * wr * fr[[kr, kc]]) / denom
+        }
+    });
+    let full = fft::inverse_real(&spectrum);
+    let heights = full.slice(s![..h, ..w]).to_owned();
+    let min = heights.iter().copied().fold(f64::INFINITY, f64::min);
+    heights.mapv(|v| v - min)
+}
+
+/// Unit normals of a height field by central differences (x right, y up; mirrored borders).
+pub fn normals_of(heights: &Array2<f64>) -> Array3<f64> {
+    let (h, w) = heights.dim();
+    let at = |y: isize, x: isize| {
+        let yy = y.clamp(0, h as isize - 1) as usize;
+        let xx = x.clamp(0, w as isize - 1) as usize;
+        heights[[yy, xx]]
+    };
+    let mut out = Array3::zeros((3, h, w));
+    for y in 0..h as isize {
+        for x in 0..w as isize {
+            let dx = (at(y, x + 1) - at(y, x - 1)) / if w > 1 { 2.0 } else { 1.0 };
+            let dr = (at(y + 1, x) - at(y - 1, x)) / if h > 1 { 2.0 } else { 1.0 };
+            // y is up: dh/dy = -dh/drow.
+            let n = [-dx, dr, 1.0];
+            let len = (n[0] * n[0] + n[1] * n[1] + 1.0).sqrt();
+            for c in 0..3 {
+                out[[c, y as usize, x as usize]] = n[c] / len;
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn correlation(a: &Array2<f64>, b: &Array2<f64>) -> f64 {
+        let n = a.len() as f64;
+        let (ma, mb) = (a.sum() / n, b.sum() / n);
+        let cov: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
+        let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
+        let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
+        cov / (va * vb).sqrt()
+    }
+
+    #[test]
+    fn a_smooth_bump_is_recovered_from_its_normals() {
+        let (h, w) = (48, 40);
+        let truth = Array2::from_shape_fn((h, w), |(y, x)| {
+            let (dy, dx) = (y as f64 - 20.0, x as f64 - 22.0);
+            6.0 * (-(dx * dx + dy * dy) / 60.0).exp() + 0.05 * x as f64
+        });
+        let est = frankot_chellappa(&normals_of(&truth));
+        let c = correlation(&est, &truth);
+        assert!(c > 0.98, "correlation {c}");
+        // The sign is right: the peak stays a peak.
+        let peak = est[[20, 22]];
+        assert!(peak > est[[2, 2]] + 3.0, "{peak}");
+    }
+
+    #[test]
+    fn flat_normals_give_a_flat_map() {
+        let mut n = Array3::zeros((3, 8, 8));
+        n.slice_mut(s![2, .., ..]).fill(1.0);
+        assert!(frankot_chellappa(&n).iter().all(|v| v.abs() < 1e-9));
+    }
+}
