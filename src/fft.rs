@@ -1,41 +1,44 @@
-//! Two-dimensional FFTs over `ndarray` planes with rustfft (rows, transpose, rows, transpose).
-//! rustfft does not normalise: the inverse here divides by `rows * cols`, so
-//! `inverse(forward(x)) == x`.
+//! Two-dimensional FFTs over `ndarray` planes with rustfft: rows, transpose, rows, transpose
+//! (the `transpose` crate does the cache-friendly transposes). rustfft does not normalise: the
+//! inverse here divides by `rows * cols`, so `inverse_real(forward(x)) == x`.
 
 use ndarray::Array2;
 use rustfft::FftPlanner;
 use rustfft::num_complex::Complex64;
 
-fn transform(data: &mut Array2<Complex64>, inverse: bool) {
+/// In-place 2D transform of a row-major `rows x cols` buffer.
+fn transform(data: &mut Vec<Complex64>, rows: usize, cols: usize, inverse: bool) {
     let mut planner = FftPlanner::<f64>::new();
-    for _ in 0..2 {
-        let (rows, cols) = data.dim();
+    let mut scratch = vec![Complex64::new(0.0, 0.0); data.len()];
+    for (n, m) in [(cols, rows), (rows, cols)] {
+        // `data` holds m rows of length n: transform each, then transpose to n x m.
         let fft = if inverse {
-            planner.plan_fft_inverse(cols)
+            planner.plan_fft_inverse(n)
         } else {
-            planner.plan_fft_forward(cols)
+            planner.plan_fft_forward(n)
         };
-        let mut flat: Vec<Complex64> = data.iter().copied().collect();
-        fft.process(&mut flat);
-        // Transpose so that the second pass runs along the other axis.
-        let t = Array2::from_shape_vec((rows, cols), flat).expect("same size");
-        *data = t.reversed_axes().as_standard_layout().to_owned();
+        fft.process(data);
+        transpose::transpose(data, &mut scratch, n, m);
+        std::mem::swap(data, &mut scratch);
     }
 }
 
 /// Forward 2D DFT of a real plane (unnormalised).
 pub(crate) fn forward(real: &Array2<f64>) -> Array2<Complex64> {
-    let mut data = real.mapv(|v| Complex64::new(v, 0.0));
-    transform(&mut data, false);
-    data
+    let (rows, cols) = real.dim();
+    let mut data: Vec<Complex64> = real.iter().map(|&v| Complex64::new(v, 0.0)).collect();
+    transform(&mut data, rows, cols, false);
+    Array2::from_shape_vec((rows, cols), data).expect("rows x cols values")
 }
 
 /// Inverse 2D DFT, normalised by `1 / (rows * cols)`; the real part.
 pub(crate) fn inverse_real(spectrum: &Array2<Complex64>) -> Array2<f64> {
-    let mut data = spectrum.clone();
-    transform(&mut data, true);
+    let (rows, cols) = spectrum.dim();
+    let mut data: Vec<Complex64> = spectrum.iter().copied().collect();
+    transform(&mut data, rows, cols, true);
     let n = data.len() as f64;
-    data.mapv(|c| c.re / n)
+    Array2::from_shape_vec((rows, cols), data.into_iter().map(|c| c.re / n).collect())
+        .expect("rows x cols values")
 }
 
 #[cfg(test)]
@@ -55,5 +58,11 @@ mod tests {
         });
         let fc = forward(&c);
         assert!((fc[[0, 1]].re - 16.0).abs() < 1e-9 && (fc[[0, 7]].re - 16.0).abs() < 1e-9);
+        // And along rows.
+        let r = Array2::from_shape_fn((8, 4), |(i, _)| {
+            (2.0 * std::f64::consts::PI * i as f64 / 8.0).cos()
+        });
+        let fr = forward(&r);
+        assert!((fr[[1, 0]].re - 16.0).abs() < 1e-9);
     }
 }

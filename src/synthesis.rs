@@ -14,6 +14,7 @@ use rayon::prelude::*;
 
 use crate::btf::{Direction, Weighted};
 use crate::decompose::marginals::match_marginal;
+use crate::decompose::pyramid::{Taps, apply_separable};
 use crate::decompose::{Border, Pyramid};
 use crate::model::{BandModel, LevelModel, MaterialModel, ModelError, Result};
 
@@ -213,22 +214,34 @@ impl MaterialModel {
     /// the stored tile), in texels; `None` without a range map.
     pub fn range_heights(&self, rows: usize, cols: usize) -> Option<Array2<f64>> {
         let map = self.range_map.as_ref()?;
-        let (n_r, n_c, step) = (map.rows as isize, map.cols as isize, map.step as f64);
-        let fold = |i: isize, n: isize| {
-            let m = i.rem_euclid(2 * n);
-            (if m < n { m } else { 2 * n - 1 - m }) as usize
+        let tile = Array2::from_shape_vec(
+            (map.rows, map.cols),
+            map.heights.iter().map(|&h| f64::from(h)).collect(),
+        )
+        .ok()?;
+        // Mirror tiling plus bilinear upsampling is separable: one set of taps per axis.
+        let taps = |out: usize, n: usize| -> Taps {
+            let fold = |i: isize| {
+                let m = i.rem_euclid(2 * n as isize);
+                (if m < n as isize {
+                    m
+                } else {
+                    2 * n as isize - 1 - m
+                }) as usize
+            };
+            (0..out)
+                .map(|i| {
+                    let u = (i as f64 + 0.5) / map.step as f64 - 0.5;
+                    let (i0, f) = (u.floor(), u - u.floor());
+                    vec![(fold(i0 as isize), 1.0 - f), (fold(i0 as isize + 1), f)]
+                })
+                .collect()
         };
-        let at =
-            |r: isize, c: isize| f64::from(map.heights[fold(r, n_r) * map.cols + fold(c, n_c)]);
-        Some(Array2::from_shape_fn((rows, cols), |(y, x)| {
-            let (u, v) = ((x as f64 + 0.5) / step - 0.5, (y as f64 + 0.5) / step - 0.5);
-            let (c0, r0) = (u.floor(), v.floor());
-            let (fx, fy) = (u - c0, v - r0);
-            let (c0, r0) = (c0 as isize, r0 as isize);
-            let top = at(r0, c0) * (1.0 - fx) + at(r0, c0 + 1) * fx;
-            let bottom = at(r0 + 1, c0) * (1.0 - fx) + at(r0 + 1, c0 + 1) * fx;
-            top * (1.0 - fy) + bottom * fy
-        }))
+        Some(apply_separable(
+            &tile,
+            &taps(rows, map.rows),
+            &taps(cols, map.cols),
+        ))
     }
 
     /// Unit normals of [`MaterialModel::range_heights`], shape (3, rows, cols).

@@ -7,7 +7,7 @@
 //! `G_k - EXPAND(G_{k+1})` and the last band is the coarsest Gaussian level, so collapsing is
 //! exact by construction. Borders are mirrored (without repeating the edge sample).
 
-use ndarray::{Array2, Axis};
+use ndarray::Array2;
 
 /// The generating kernel, a = 0.4.
 const KERNEL: [f64; 5] = [0.05, 0.25, 0.4, 0.25, 0.05];
@@ -41,46 +41,61 @@ impl Border {
     }
 }
 
-/// Blurs along one axis with the kernel, mirrored borders.
-fn blur_axis(input: &Array2<f64>, axis: usize) -> Array2<f64> {
-    let mut out = Array2::zeros(input.dim());
-    let n = input.len_of(Axis(axis));
-    for (src, mut dst) in input
-        .lanes(Axis(axis))
-        .into_iter()
-        .zip(out.lanes_mut(Axis(axis)))
-    {
-        for i in 0..n {
-            dst[i] = KERNEL
+/// A 1D linear map as, for each output index, its (input index, weight) taps. Building it once
+/// per axis keeps the border logic out of the per-pixel loops.
+pub(crate) type Taps = Vec<Vec<(usize, f64)>>;
+
+/// Taps of the blur along an axis of length `n`, mirrored borders.
+fn blur_taps(n: usize) -> Taps {
+    (0..n)
+        .map(|i| {
+            KERNEL
                 .iter()
                 .enumerate()
-                .map(|(k, w)| w * src[mirror(i as isize + k as isize - 2, n)])
-                .sum();
-        }
-    }
-    out
+                .map(|(k, &w)| (mirror(i as isize + k as isize - 2, n), w))
+                .collect()
+        })
+        .collect()
 }
 
-/// Upsamples one axis to length `target` (zero insertion) and blurs with twice the kernel.
-fn expand_axis(input: &Array2<f64>, axis: usize, target: usize, border: Border) -> Array2<f64> {
-    let mut shape = [input.nrows(), input.ncols()];
-    shape[axis] = target;
-    let mut out = Array2::zeros(shape);
-    let n_in = input.len_of(Axis(axis));
-    for (src, mut dst) in input
-        .lanes(Axis(axis))
-        .into_iter()
-        .zip(out.lanes_mut(Axis(axis)))
-    {
-        for i in 0..target {
-            let mut acc = 0.0;
-            for (k, w) in KERNEL.iter().enumerate() {
+/// Taps of EXPAND from `n_in` samples to `target`: zero insertion, then twice the kernel.
+fn expand_taps(n_in: usize, target: usize, border: Border) -> Taps {
+    (0..target)
+        .map(|i| {
+            let mut taps: Vec<(usize, f64)> = Vec::with_capacity(3);
+            for (k, &w) in KERNEL.iter().enumerate() {
                 let j = border.index(i as isize + k as isize - 2, target);
                 if j.is_multiple_of(2) && j / 2 < n_in {
-                    acc += 2.0 * w * src[j / 2];
+                    match taps.iter_mut().find(|t| t.0 == j / 2) {
+                        Some(t) => t.1 += 2.0 * w,
+                        None => taps.push((j / 2, 2.0 * w)),
+                    }
                 }
             }
-            dst[i] = acc;
+            taps
+        })
+        .collect()
+}
+
+/// Applies taps along rows (each output row a weighted sum of whole input rows, so the inner
+/// loop runs over contiguous memory) and then along columns.
+pub(crate) fn apply_separable(
+    input: &Array2<f64>,
+    row_taps: &Taps,
+    col_taps: &Taps,
+) -> Array2<f64> {
+    let cols_in = input.ncols();
+    let mut tmp = Array2::<f64>::zeros((row_taps.len(), cols_in));
+    for (mut out_row, taps) in tmp.rows_mut().into_iter().zip(row_taps) {
+        for &(j, w) in taps {
+            out_row.scaled_add(w, &input.row(j));
+        }
+    }
+    let mut out = Array2::<f64>::zeros((row_taps.len(), col_taps.len()));
+    for (src, mut dst) in tmp.rows().into_iter().zip(out.rows_mut()) {
+        let src = src.as_slice().expect("standard layout");
+        for (d, taps) in dst.iter_mut().zip(col_taps) {
+            *d = taps.iter().map(|&(j, w)| w * src[j]).sum();
         }
     }
     out
@@ -88,8 +103,10 @@ fn expand_axis(input: &Array2<f64>, axis: usize, target: usize, border: Border) 
 
 /// REDUCE: blur and keep every other row and column; shape `(ceil(h/2), ceil(w/2))`.
 pub fn reduce(image: &Array2<f64>) -> Array2<f64> {
-    let blurred = blur_axis(&blur_axis(image, 0), 1);
-    blurred.slice(ndarray::s![..;2, ..;2]).to_owned()
+    let (rows, cols) = image.dim();
+    // Only every other output sample is kept, so only those taps are built.
+    let keep = |taps: Taps| taps.into_iter().step_by(2).collect::<Taps>();
+    apply_separable(image, &keep(blur_taps(rows)), &keep(blur_taps(cols)))
 }
 
 /// EXPAND to an explicit `(rows, cols)` (the size of the finer level), mirrored borders.
@@ -99,7 +116,12 @@ pub fn expand(image: &Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
 
 /// EXPAND with a chosen border rule.
 pub fn expand_with(image: &Array2<f64>, rows: usize, cols: usize, border: Border) -> Array2<f64> {
-    expand_axis(&expand_axis(image, 0, rows, border), 1, cols, border)
+    let (r_in, c_in) = image.dim();
+    apply_separable(
+        image,
+        &expand_taps(r_in, rows, border),
+        &expand_taps(c_in, cols, border),
+    )
 }
 
 /// A Laplacian pyramid: band 0 is the finest, the last band the coarse Gaussian residual.

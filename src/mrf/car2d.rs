@@ -290,26 +290,46 @@ impl Car2dModel {
             return y.mapv(|v| v + self.mean);
         }
         // A zero border of 3 (the widest reach) around a margin-padded field keeps every
-        // neighbour index in range; the bottom-middle rows x cols are returned.
+        // neighbour index in range; the bottom-middle rows x cols are returned. Each row is
+        // built in two steps: the terms from earlier rows for the whole row at once
+        // (contiguous, vectorisable), then the short in-row recursion left to right.
         let pad = 3;
         let width = pad + MARGIN + cols + MARGIN + pad;
         let height = pad + MARGIN + rows;
+        let inner = width - 2 * pad;
         let mut y = vec![0.0f64; width * height];
-        let lin: Vec<(f64, usize)> = self
+        let (earlier, in_row): (Vec<_>, Vec<_>) = self
             .gamma
             .iter()
             .zip(offsets)
-            .map(|(&g, &(s1, s2))| (g, (s1 * width as isize + s2) as usize))
+            .map(|(&g, &(s1, s2))| (g, s1 as usize, s2))
+            .partition(|&(_, s1, _)| s1 > 0);
+        let in_row: Vec<(f64, usize)> = in_row
+            .into_iter()
+            .map(|(g, _, s2)| (g, s2 as usize))
             .collect();
         for r in pad..height {
-            let row = r * width;
-            for c in pad..width - pad {
-                let i = row + c;
-                let mut acc = sigma * noise();
-                for &(g, off) in &lin {
-                    acc += g * y[i - off];
+            let (before, rest) = y.split_at_mut(r * width);
+            let row = &mut rest[pad..width - pad];
+            for v in row.iter_mut() {
+                *v = sigma * noise();
+            }
+            for &(g, s1, s2) in &earlier {
+                let start = ((r - s1) * width + pad) as isize - s2;
+                let src = &before[start as usize..start as usize + inner];
+                for (v, &p) in row.iter_mut().zip(src) {
+                    *v += g * p;
                 }
-                y[i] = acc;
+            }
+            if !in_row.is_empty() {
+                let row = &mut rest[..width - pad];
+                for c in pad..width - pad {
+                    let mut acc = row[c];
+                    for &(g, s2) in &in_row {
+                        acc += g * row[c - s2];
+                    }
+                    row[c] = acc;
+                }
             }
         }
         Array2::from_shape_fn((rows, cols), |(r, c)| {

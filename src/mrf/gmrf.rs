@@ -13,6 +13,9 @@ use rand_pcg::Pcg64Mcg;
 use super::neighbourhood::{MAX_ORDER, causal};
 use crate::fft;
 
+/// (sin, cos) of `omega_k * s` for every frequency index k along one axis.
+type SinCos = Vec<(f64, f64)>;
+
 /// Smallest spectral denominator accepted (the model is valid when it stays above 0).
 const MU_FLOOR: f64 = 1e-3;
 
@@ -202,18 +205,30 @@ impl GmrfModel {
     }
 
     /// `mu(omega) = 1 - 2 sum_s gamma_s cos(omega . s)` on the `rows` x `cols` DFT grid.
+    /// The cosine of a sum is expanded into per-axis tables, so no trigonometry runs per bin.
     fn denominators(&self, rows: usize, cols: usize) -> Array2<f64> {
         let offsets = causal(self.order as usize);
         let tau = 2.0 * std::f64::consts::PI;
-        Array2::from_shape_fn((rows, cols), |(k1, k2)| {
-            let (w1, w2) = (tau * k1 as f64 / rows as f64, tau * k2 as f64 / cols as f64);
-            1.0 - 2.0
-                * offsets
-                    .iter()
-                    .zip(&self.gamma)
-                    .map(|(&(s1, s2), g)| g * (w1 * s1 as f64 + w2 * s2 as f64).cos())
-                    .sum::<f64>()
-        })
+        let table = |n: usize, s: isize| -> SinCos {
+            (0..n)
+                .map(|k| (tau * k as f64 * s as f64 / n as f64).sin_cos())
+                .collect()
+        };
+        let tables: Vec<(f64, SinCos, SinCos)> = offsets
+            .iter()
+            .zip(&self.gamma)
+            .map(|(&(s1, s2), &g)| (g, table(rows, s1), table(cols, s2)))
+            .collect();
+        let mut mu = Array2::from_elem((rows, cols), 1.0);
+        for (g, t1, t2) in &tables {
+            for (k1, mut row) in mu.rows_mut().into_iter().enumerate() {
+                let (s1, c1) = t1[k1];
+                for (m, &(s2, c2)) in row.iter_mut().zip(t2) {
+                    *m -= 2.0 * g * (c1 * c2 - s1 * s2);
+                }
+            }
+        }
+        mu
     }
 
     /// The model with its spectrum positive on a `rows` x `cols` grid: unchanged if it is,
@@ -244,11 +259,18 @@ impl GmrfModel {
         if rows == 0 || cols == 0 {
             return Array2::zeros((rows, cols));
         }
-        let (valid, _) = self.made_valid(rows, cols);
+        // Check positivity on this very grid; shrinking gamma by kappa maps mu to
+        // 1 - kappa (1 - mu), so the repair needs no second pass over the frequencies.
+        let mut mu = self.denominators(rows, cols);
+        let min = mu.iter().copied().fold(f64::INFINITY, f64::min);
+        if min < MU_FLOOR {
+            let peak = 1.0 - min;
+            let kappa = (1.0 - MU_FLOOR) / peak;
+            mu.mapv_inplace(|m| 1.0 - kappa * (1.0 - m));
+        }
         let mut rng = Pcg64Mcg::seed_from_u64(seed);
         let noise = Array2::from_shape_simple_fn((rows, cols), || StandardNormal.sample(&mut rng));
         let mut spectrum = fft::forward(&noise);
-        let mu = valid.denominators(rows, cols);
         let sigma2 = self.sigma2.max(0.0);
         spectrum.zip_mut_with(&mu, |s, &m| *s *= (sigma2 / m).sqrt());
         fft::inverse_real(&spectrum).mapv(|v| v + self.mean)
