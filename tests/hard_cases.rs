@@ -131,3 +131,228 @@ fn lights_below_the_horizon_give_ambient_only_and_views_below_it_do_not_break() 
     let grazing_view = s.load(1, 1).unwrap();
     assert!(grazing_view.iter().all(|x| x.is_finite() && *x >= 0.0));
 }
+
+// ---- The MRF model on degenerate inputs ------------------------------------------------------
+
+mod mrf_cases {
+    use btfmrf::analysis::{AnalysisOptions, analyze};
+    use btfmrf::btf::{Btf, Direction, DirectionSet};
+    use btfmrf::model::ModelKind;
+    use btfmrf::mrf::{Car2dModel, Car3dModel, GmrfModel};
+    use btfmrf::progress::NoProgress;
+    use btfmrf::synthesis::SynthesisOptions;
+    use ndarray::{Array2, Array3};
+
+    /// A BTF of one view and `images.len()` lights, every image given.
+    fn btf_of(images: Vec<Array3<f32>>) -> Btf {
+        let n = images.len();
+        let lights = DirectionSet::new(
+            (0..n)
+                .map(|k| Direction::new(20.0 + 40.0 * (k % 2) as f64, 360.0 * k as f64 / n as f64))
+                .collect(),
+        )
+        .unwrap();
+        Btf::from_images(DirectionSet::zenith(), lights, images).unwrap()
+    }
+
+    /// Analyses with every model kind and synthesizes a 48 x 40 image; all must be finite.
+    fn survives(btf: &Btf, what: &str) {
+        for kind in ModelKind::ALL {
+            let options = AnalysisOptions {
+                kind,
+                clusters: 3,
+                ..AnalysisOptions::default()
+            };
+            let (model, _) = analyze(btf, &options, &NoProgress)
+                .unwrap_or_else(|e| panic!("{what} {kind}: {e}"));
+            let o = SynthesisOptions {
+                rows: 48,
+                cols: 40,
+                seed: 1,
+                tileable: false,
+            };
+            let im = model
+                .synthesize_image(&Direction::new(0.0, 0.0), &Direction::new(30.0, 0.0), &o)
+                .unwrap();
+            assert!(im.iter().all(|v| v.is_finite()), "{what} {kind}");
+        }
+    }
+
+    fn image(h: usize, w: usize, f: impl Fn(usize, usize, usize) -> f32) -> Array3<f32> {
+        Array3::from_shape_fn((3, h, w), |(c, y, x)| f(c, y, x))
+    }
+
+    #[test]
+    fn constant_saturated_tiny_and_thin_images() {
+        let constant = btf_of(vec![image(32, 32, |_, _, _| 0.4); 4]);
+        survives(&constant, "constant");
+        let saturated = btf_of(vec![image(32, 32, |_, _, _| 1.0); 4]);
+        survives(&saturated, "saturated");
+        let half_clipped = btf_of(
+            (0..4)
+                .map(|k| image(32, 32, |_, y, x| ((x * y + k) % 7) as f32 / 3.0))
+                .collect(),
+        );
+        survives(&half_clipped, "half clipped");
+        let tiny = btf_of(
+            (0..4)
+                .map(|k| image(4, 4, |c, y, x| ((x + 2 * y + c + k) % 5) as f32 / 5.0))
+                .collect(),
+        );
+        survives(&tiny, "4x4");
+        let thin = btf_of(
+            (0..4)
+                .map(|k| image(64, 1, |c, y, _| ((y * 3 + c + k) % 7) as f32 / 7.0))
+                .collect(),
+        );
+        survives(&thin, "1 pixel wide");
+    }
+
+    #[test]
+    fn ramps_and_checkerboards() {
+        let ramp = btf_of(
+            (0..4)
+                .map(|k| {
+                    image(32, 32, |c, y, x| {
+                        (x as f32 + 2.0 * y as f32 + c as f32 + k as f32) / 100.0
+                    })
+                })
+                .collect(),
+        );
+        survives(&ramp, "ramp");
+        let checker = btf_of(
+            (0..4)
+                .map(|k| {
+                    image(
+                        32,
+                        32,
+                        |_, y, x| if (x + y + k) % 2 == 0 { 0.9 } else { 0.1 },
+                    )
+                })
+                .collect(),
+        );
+        survives(&checker, "checkerboard");
+        // The band models on their own: a checkerboard is a unit-root process for the CAR and a
+        // spectrum touching zero for the GMRF; both must come out stable and valid.
+        let board =
+            Array2::from_shape_fn((32, 32), |(y, x)| if (x + y) % 2 == 0 { 1.0 } else { -1.0 });
+        let car = Car2dModel::fit(&board, 6).model;
+        assert!(car.is_stable(1.0));
+        let gmrf = GmrfModel::fit(&board, 4);
+        assert!(
+            gmrf.model
+                .synthesize(32, 32, 1)
+                .iter()
+                .all(|v| v.is_finite())
+        );
+    }
+
+    #[test]
+    fn parameters_just_outside_the_stable_region_are_repaired() {
+        // CAR: sum |a| = 1.02, a unit-root-plus process.
+        let wild = Car2dModel {
+            order: 1,
+            gamma: vec![0.51, 0.51],
+            sigma2: 1.0,
+            mean: 0.0,
+        };
+        assert!(!wild.is_stable(1.0));
+        let field = wild.synthesize(64, 64, 1, false);
+        // Fitting data from such a process gives a stable model.
+        let refit = Car2dModel::fit(&field.mapv(|v| v.clamp(-1e6, 1e6)), 6);
+        assert!(
+            refit
+                .model
+                .is_stable(field.iter().map(|v| v * v).sum::<f64>() / 4096.0)
+        );
+        // GMRF: 2 * sum |gamma| = 1.04, the spectrum dips below zero.
+        let g = GmrfModel {
+            order: 1,
+            gamma: vec![0.26, 0.26],
+            sigma2: 1.0,
+            mean: 0.0,
+        };
+        let (fixed, note) = g.made_valid(32, 32);
+        assert!(note.is_some());
+        assert!(fixed.synthesize(32, 32, 2).iter().all(|v| v.is_finite()));
+        // 3D CAR: matrices whose norms sum past 1.
+        let m = Car3dModel {
+            order: 1,
+            a: vec![
+                0.6, 0.0, 0.0, 0.0, 0.6, 0.0, 0.0, 0.0, 0.6, 0.6, 0.0, 0.0, 0.0, 0.6, 0.0, 0.0,
+                0.0, 0.6,
+            ],
+            sigma: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            mean: [0.0; 3],
+        };
+        assert!(!m.is_stable(3.0));
+    }
+
+    #[test]
+    fn more_clusters_than_distinct_images() {
+        let two = [image(16, 16, |_, _, _| 0.2), image(16, 16, |_, _, _| 0.7)];
+        let btf = btf_of(vec![
+            two[0].clone(),
+            two[1].clone(),
+            two[0].clone(),
+            two[1].clone(),
+            two[0].clone(),
+        ]);
+        let options = AnalysisOptions {
+            clusters: 20,
+            ..AnalysisOptions::default()
+        };
+        let (model, _) = analyze(&btf, &options, &NoProgress).unwrap();
+        assert_eq!(model.subspaces.len(), 2);
+    }
+
+    #[test]
+    fn photometric_stereo_with_grazing_or_only_three_lights() {
+        // All lights below 10 degrees of elevation: no range map, a note, still a model.
+        let lights = DirectionSet::new(
+            (0..6)
+                .map(|k| Direction::new(82.0, 60.0 * k as f64))
+                .collect(),
+        )
+        .unwrap();
+        let images = (0..6)
+            .map(|k| image(24, 24, |_, y, x| ((x + y + k) % 4) as f32 / 4.0))
+            .collect();
+        let btf = Btf::from_images(DirectionSet::zenith(), lights, images).unwrap();
+        let (model, report) = analyze(
+            &btf,
+            &AnalysisOptions {
+                clusters: 2,
+                ..AnalysisOptions::default()
+            },
+            &NoProgress,
+        )
+        .unwrap();
+        assert!(model.range_map.is_none());
+        assert!(
+            report.repairs.iter().any(|r| r.contains("no range map")),
+            "{:?}",
+            report.repairs
+        );
+        // An RTI-like set of exactly three lights.
+        let three = btf_of(
+            (0..3)
+                .map(|k| {
+                    image(24, 24, |c, y, x| {
+                        0.2 + ((x * (k + 1) + y + c) % 5) as f32 / 10.0
+                    })
+                })
+                .collect(),
+        );
+        let (model, _) = analyze(
+            &three,
+            &AnalysisOptions {
+                clusters: 3,
+                ..AnalysisOptions::default()
+            },
+            &NoProgress,
+        )
+        .unwrap();
+        assert!(model.range_map.is_some());
+    }
+}

@@ -232,3 +232,37 @@ fn cli_analyze_and_synthesize() {
     ]);
     assert!(err.contains("junk.btfm"), "{err}");
 }
+
+#[test]
+fn real_rti_sets_analyze_and_synthesize() {
+    for (set, kind) in [
+        ("loewenkopf", ModelKind::Gmrf),
+        ("clay-leaf", ModelKind::Car2d),
+        ("loewenkopf", ModelKind::Car3d),
+    ] {
+        let btf = Btf::open(format!("../shared/data/rti/{set}")).unwrap();
+        let options = AnalysisOptions {
+            kind,
+            clusters: 8,
+            ..AnalysisOptions::default()
+        };
+        let (model, _) = analyze(&btf, &options, &NoProgress).unwrap();
+        let bytes = format::to_bytes(&model);
+        assert!(bytes.len() < 150 * 1024, "{set}: {}", bytes.len());
+        assert!(model.range_map.is_some(), "{set}: photometric stereo ran");
+        let light = *btf.lights().get(10).unwrap();
+        let synth = model
+            .synthesize_image(&Direction::new(0.0, 0.0), &light, &opts(256, 1))
+            .unwrap();
+        assert!(synth.iter().all(|v| v.is_finite()));
+        let measured = btf.image(0, 10).unwrap();
+        let f = btfmrf::eval::texture_fidelity(&synth, &measured);
+        println!(
+            "{set} {kind}: {} bytes, fidelity colour {:.2} structure {:.3} score {:.3}",
+            bytes.len(),
+            f.colour,
+            f.structure,
+            f.score
+        );
+    }
+}
