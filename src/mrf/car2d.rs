@@ -11,6 +11,7 @@ use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
 
 use super::neighbourhood::{MAX_ORDER, causal, reach};
+use super::{Car2dFit, choose_stable};
 
 /// Burn-in margin of the causal synthesis, pixels (fixed, so that every band of every
 /// subspace sees the same driving noise at the same position).
@@ -27,17 +28,6 @@ pub struct Car2dModel {
     pub sigma2: f64,
     /// Band mean (added back after synthesis).
     pub mean: f64,
-}
-
-/// What fitting found besides the model: the score of every candidate and any repair made.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Car2dFit {
-    /// The chosen (and possibly repaired) model.
-    pub model: Car2dModel,
-    /// (order, decision function D) of every candidate evaluated.
-    pub candidates: Vec<(u8, f64)>,
-    /// How an unstable estimate was repaired, if it was.
-    pub repair: Option<String>,
 }
 
 /// Accumulates `sum [Y; X][Y; X]^T` over the sites where `offsets` fit.
@@ -185,58 +175,25 @@ impl Car2dModel {
         }
         let candidates: Vec<(u8, f64)> = scored.iter().map(|s| (s.0, s.1)).collect();
         scored.sort_by(|a, b| b.1.total_cmp(&a.1));
-        let best_order = scored.first().map(|s| s.0);
-        for (order, _, gamma, sigma2) in &scored {
-            let model = Self {
-                order: *order,
-                gamma: gamma.clone(),
-                sigma2: *sigma2,
-                mean,
-            };
-            if model.is_stable(var) {
-                let repair = (Some(*order) != best_order).then(|| {
-                    format!(
-                        "order {} was unstable; used the next-best stable order {order}",
-                        best_order.unwrap_or(0)
-                    )
-                });
-                return Car2dFit {
-                    model,
-                    candidates,
-                    repair,
+        let sorted = scored
+            .into_iter()
+            .map(|(order, _, gamma, sigma2)| {
+                let model = Self {
+                    order,
+                    gamma,
+                    sigma2,
+                    mean,
                 };
-            }
-        }
-        // No candidate is stable: shrink the best one until it is.
-        let Some((order, _, gamma, sigma2)) = scored.into_iter().next() else {
-            return Car2dFit {
-                model: white,
-                candidates,
-                repair: Some("singular statistics: white noise".into()),
-            };
-        };
-        let base = Self {
-            order,
-            gamma,
-            sigma2,
-            mean,
-        };
-        let (mut lo, mut hi) = (0.0, 1.0);
-        for _ in 0..30 {
-            let mid = 0.5 * (lo + hi);
-            if base.shrunk(mid).is_stable(var) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        Car2dFit {
-            model: base.shrunk(lo),
+                (order, model)
+            })
+            .collect();
+        choose_stable(
+            sorted,
             candidates,
-            repair: Some(format!(
-                "no order was stable; shrank order {order} by {lo:.3}"
-            )),
-        }
+            white,
+            |m| m.is_stable(var),
+            Self::shrunk,
+        )
     }
 
     fn shrunk(&self, kappa: f64) -> Self {

@@ -11,6 +11,7 @@ use rand_pcg::Pcg64Mcg;
 
 use super::car2d::{MARGIN, bounded_sample};
 use super::neighbourhood::{causal, reach};
+use super::{Car3dFit, choose_stable};
 
 /// Channels modelled jointly (RGB).
 pub const D: usize = 3;
@@ -26,17 +27,6 @@ pub struct Car3dModel {
     pub sigma: [f64; 9],
     /// Channel means.
     pub mean: [f64; 3],
-}
-
-/// The fitted model, the candidates' decision values and any repair.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Car3dFit {
-    /// The chosen (possibly repaired) model.
-    pub model: Car3dModel,
-    /// (order, D) of every candidate.
-    pub candidates: Vec<(u8, f64)>,
-    /// How an unstable estimate was repaired, if it was.
-    pub repair: Option<String>,
 }
 
 /// Largest order the 3D model tries (10 neighbours, 90 coefficients).
@@ -193,44 +183,14 @@ impl Car3dModel {
         }
         let candidates: Vec<(u8, f64)> = scored.iter().map(|s| (s.0, s.1)).collect();
         scored.sort_by(|x, y| y.1.total_cmp(&x.1));
-        let best_order = scored.first().map(|s| s.0).unwrap_or(0);
-        for (order, _, model) in &scored {
-            if model.is_stable(total_var) {
-                let repair = (*order != best_order).then(|| {
-                    format!(
-                        "order {best_order} was unstable; used the next-best stable order {order}"
-                    )
-                });
-                return Car3dFit {
-                    model: model.clone(),
-                    candidates,
-                    repair,
-                };
-            }
-        }
-        let Some((order, _, base)) = scored.into_iter().next() else {
-            return Car3dFit {
-                model: white,
-                candidates,
-                repair: Some("singular statistics: white noise".into()),
-            };
-        };
-        let (mut lo, mut hi) = (0.0, 1.0);
-        for _ in 0..30 {
-            let mid = 0.5 * (lo + hi);
-            if base.shrunk(mid).is_stable(total_var) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        Car3dFit {
-            model: base.shrunk(lo),
+        let sorted = scored.into_iter().map(|(order, _, m)| (order, m)).collect();
+        choose_stable(
+            sorted,
             candidates,
-            repair: Some(format!(
-                "no order was stable; shrank order {order} by {lo:.3}"
-            )),
-        }
+            white,
+            |m| m.is_stable(total_var),
+            Self::shrunk,
+        )
     }
 
     fn shrunk(&self, kappa: f64) -> Self {

@@ -10,6 +10,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
 
+use super::GmrfFit;
 use super::neighbourhood::{MAX_ORDER, causal};
 use crate::fft;
 
@@ -31,17 +32,6 @@ pub struct GmrfModel {
     pub sigma2: f64,
     /// Band mean.
     pub mean: f64,
-}
-
-/// The fitted model and what was done to it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct GmrfFit {
-    /// The chosen (and possibly repaired) model.
-    pub model: GmrfModel,
-    /// (order, BIC-like score `t ln sigma^2 + eta ln t`, lower is better) of every candidate.
-    pub candidates: Vec<(u8, f64)>,
-    /// How an invalid (non-positive spectrum) estimate was repaired, if it was.
-    pub repair: Option<String>,
 }
 
 fn wrap(i: isize, n: usize) -> usize {
