@@ -261,10 +261,13 @@ impl Car2dModel {
             .zip(offsets)
             .map(|(&g, &(s1, s2))| (g, s1 as usize, s2))
             .partition(|&(_, s1, _)| s1 > 0);
-        let in_row: Vec<(f64, usize)> = in_row
+        // Farthest in-row neighbour first: the left neighbour, computed just before, is added
+        // last, which keeps the loop-carried dependency to one multiply-add.
+        let mut in_row: Vec<(f64, usize)> = in_row
             .into_iter()
             .map(|(g, _, s2)| (g, s2 as usize))
             .collect();
+        in_row.sort_by_key(|&(_, s2)| std::cmp::Reverse(s2));
         for r in pad..height {
             let (before, rest) = y.split_at_mut(r * width);
             let row = &mut rest[pad..width - pad];

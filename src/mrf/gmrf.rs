@@ -258,12 +258,22 @@ impl GmrfModel {
             let kappa = (1.0 - MU_FLOOR) / peak;
             mu.mapv_inplace(|m| 1.0 - kappa * (1.0 - m));
         }
+        // White noise is drawn directly in the frequency domain (circular complex Gaussian,
+        // unit power per bin) instead of transforming a real noise field: one FFT instead of
+        // two. The real part of the inverse transform, scaled by sqrt(2 M N), has exactly the
+        // model's covariance (1/MN) sum_k S_k cos(omega_k . lag).
         let mut rng = Pcg64Mcg::seed_from_u64(seed);
-        let noise = Array2::from_shape_simple_fn((rows, cols), || StandardNormal.sample(&mut rng));
-        let mut spectrum = fft::forward(&noise);
+        let half = std::f64::consts::FRAC_1_SQRT_2;
         let sigma2 = self.sigma2.max(0.0);
-        spectrum.zip_mut_with(&mu, |s, &m| *s *= (sigma2 / m).sqrt());
-        fft::inverse_real(&spectrum).mapv(|v| v + self.mean)
+        let spectrum = mu.mapv(|m| {
+            let (a, b): (f64, f64) = (
+                StandardNormal.sample(&mut rng),
+                StandardNormal.sample(&mut rng),
+            );
+            rustfft::num_complex::Complex64::new(a * half, b * half) * (sigma2 / m).sqrt()
+        });
+        let scale = (2.0 * (rows * cols) as f64).sqrt();
+        fft::inverse_real(&spectrum).mapv(|v| v * scale + self.mean)
     }
 
     /// The stationary variance of the model on a `rows` x `cols` torus:
