@@ -83,8 +83,12 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             "repairs": report.repairs,
         }))?;
     } else {
-        for r in &report.repairs {
-            eprintln!("note: {r}");
+        if !report.repairs.is_empty() {
+            eprintln!(
+                "note: {} estimate(s) were repaired (--json lists all), e.g. {}",
+                report.repairs.len(),
+                report.repairs[0]
+            );
         }
         emit(format!(
             "wrote {} ({} model, {} subspaces, {} levels): {} for {} raw, 1:{:.0}, in {:.2} s",
