@@ -91,11 +91,24 @@ pub(crate) fn apply_separable(
             out_row.scaled_add(w, &input.row(j));
         }
     }
+    // The column taps flattened once (start offsets, then index/weight pairs), so the
+    // per-pixel loop reads contiguous memory instead of one small vector per output column.
+    let mut starts = Vec::with_capacity(col_taps.len() + 1);
+    let mut flat: Vec<(usize, f64)> = Vec::new();
+    for taps in col_taps {
+        starts.push(flat.len());
+        flat.extend_from_slice(taps);
+    }
+    starts.push(flat.len());
     let mut out = Array2::<f64>::zeros((row_taps.len(), col_taps.len()));
     for (src, mut dst) in tmp.rows().into_iter().zip(out.rows_mut()) {
         let src = src.as_slice().expect("standard layout");
-        for (d, taps) in dst.iter_mut().zip(col_taps) {
-            *d = taps.iter().map(|&(j, w)| w * src[j]).sum();
+        let dst = dst.as_slice_mut().expect("standard layout");
+        for (i, d) in dst.iter_mut().enumerate() {
+            *d = flat[starts[i]..starts[i + 1]]
+                .iter()
+                .map(|&(j, w)| w * src[j])
+                .sum();
         }
     }
     out
