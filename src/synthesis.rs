@@ -90,7 +90,9 @@ impl MaterialModel {
                     .zip(&shapes)
                     .enumerate()
                     .map(|(lv, (level, &(r, c)))| match level {
-                        LevelModel::Joint(m) => m.synthesize(r, c, band_seed(o.seed, 3, lv)),
+                        LevelModel::Joint(m) => {
+                            m.synthesize(r, c, band_seed(o.seed, 3, lv), o.tileable)
+                        }
                         LevelModel::Factors(_) => Array3::zeros((3, r, c)),
                     })
                     .collect();
@@ -204,15 +206,17 @@ impl MaterialModel {
         for (w, part) in parts {
             out.scaled_add(w as f32, &part);
         }
-        if let Some(normals) = self.range_normals(o.rows, o.cols) {
+        if let Some(normals) = self.range_normals(o.rows, o.cols, o.tileable) {
             bump_relight(&mut out, &normals, light);
         }
         Ok(out)
     }
 
     /// The range map over `rows` x `cols` output texels (mirror-tiled, bilinearly upsampled from
-    /// the stored tile), in texels; `None` without a range map.
-    pub fn range_heights(&self, rows: usize, cols: usize) -> Option<Array2<f64>> {
+    /// the stored tile), in texels; `None` without a range map. Mirror tiling repeats every two
+    /// tiles; with `tileable` the map is stretched slightly so that a whole number of those
+    /// periods fits the output, which then wraps seamlessly.
+    pub fn range_heights(&self, rows: usize, cols: usize, tileable: bool) -> Option<Array2<f64>> {
         let map = self.range_map.as_ref()?;
         let tile = Array2::from_shape_vec(
             (map.rows, map.cols),
@@ -221,6 +225,12 @@ impl MaterialModel {
         .ok()?;
         // Mirror tiling plus bilinear upsampling is separable: one set of taps per axis.
         let taps = |out: usize, n: usize| -> Taps {
+            let period = (2 * n * map.step) as f64;
+            let scale = if tileable {
+                out as f64 / ((out as f64 / period).round().max(1.0) * period)
+            } else {
+                1.0
+            };
             let fold = |i: isize| {
                 let m = i.rem_euclid(2 * n as isize);
                 (if m < n as isize {
@@ -231,7 +241,7 @@ impl MaterialModel {
             };
             (0..out)
                 .map(|i| {
-                    let u = (i as f64 + 0.5) / map.step as f64 - 0.5;
+                    let u = (i as f64 + 0.5) / scale / map.step as f64 - 0.5;
                     let (i0, f) = (u.floor(), u - u.floor());
                     vec![(fold(i0 as isize), 1.0 - f), (fold(i0 as isize + 1), f)]
                 })
@@ -244,10 +254,15 @@ impl MaterialModel {
         ))
     }
 
-    /// Unit normals of [`MaterialModel::range_heights`], shape (3, rows, cols).
-    pub fn range_normals(&self, rows: usize, cols: usize) -> Option<Array3<f64>> {
-        self.range_heights(rows, cols)
-            .map(|h| crate::geometry::normals_of(&h))
+    /// Unit normals of [`MaterialModel::range_heights`], shape (3, rows, cols); differences
+    /// wrap around the borders when `tileable`.
+    pub fn range_normals(&self, rows: usize, cols: usize, tileable: bool) -> Option<Array3<f64>> {
+        let heights = self.range_heights(rows, cols, tileable)?;
+        Some(if tileable {
+            crate::geometry::integrate::normals_of_periodic(&heights)
+        } else {
+            crate::geometry::normals_of(&heights)
+        })
     }
 }
 

@@ -266,3 +266,39 @@ fn real_rti_sets_analyze_and_synthesize() {
         );
     }
 }
+
+/// Mean squared difference between horizontally adjacent pixels: across the wrap (last column
+/// against the first) and inside the image.
+fn seam_and_interior(im: &ndarray::Array3<f32>) -> (f64, f64) {
+    let (_, h, w) = im.dim();
+    let diff = |x0: usize, x1: usize| -> f64 {
+        (0..3)
+            .flat_map(|c| (0..h).map(move |y| (c, y)))
+            .map(|(c, y)| f64::from(im[[c, y, x0]] - im[[c, y, x1]]).powi(2))
+            .sum::<f64>()
+            / (3 * h) as f64
+    };
+    let interior = (0..w - 1).map(|x| diff(x, x + 1)).sum::<f64>() / (w - 1) as f64;
+    (diff(w - 1, 0), interior)
+}
+
+#[test]
+fn tileable_images_wrap_seamlessly() {
+    let (view, light) = (Direction::new(0.0, 0.0), Direction::new(30.0, 60.0));
+    for m in models() {
+        let mut o = opts(64, 3);
+        o.tileable = true;
+        let tiled = m.synthesize_image(&view, &light, &o).unwrap();
+        let (seam, interior) = seam_and_interior(&tiled);
+        println!(
+            "{}: tileable seam {seam:.5} vs interior {interior:.5}",
+            m.kind
+        );
+        if m.kind == ModelKind::Gmrf {
+            // Exact torus sample, periodic pyramid, pointwise colour maps, periodic relief.
+            assert!(seam < 2.0 * interior, "{seam} vs {interior}");
+        } else {
+            assert!(seam < 3.0 * interior, "{}: {seam} vs {interior}", m.kind);
+        }
+    }
+}

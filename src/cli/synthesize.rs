@@ -183,7 +183,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let total = model.subspaces.len();
     let source = ModelSource {
         subspaces: (0..total).map(|_| OnceLock::new()).collect(),
-        normals: model.range_normals(rows, cols),
+        normals: model.range_normals(rows, cols, options.tileable),
         model,
         options,
         views: views.clone(),

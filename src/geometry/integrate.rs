@@ -70,19 +70,26 @@ pub fn frankot_chellappa(normals: &Array3<f64>) -> Array2<f64> {
     heights.mapv(|v| v - min)
 }
 
-/// Unit normals of a height field by central differences (x right, y up; mirrored borders).
+/// Unit normals of a height field by central differences (x right, y up; edge samples repeated
+/// at the borders).
 pub fn normals_of(heights: &Array2<f64>) -> Array3<f64> {
+    normals_with(heights, |i, n| i.clamp(0, n as isize - 1) as usize)
+}
+
+/// Unit normals of a periodic height field (differences wrap around the borders).
+pub fn normals_of_periodic(heights: &Array2<f64>) -> Array3<f64> {
+    normals_with(heights, |i, n| i.rem_euclid(n as isize) as usize)
+}
+
+fn normals_with(heights: &Array2<f64>, index: impl Fn(isize, usize) -> usize) -> Array3<f64> {
     let (h, w) = heights.dim();
-    let at = |y: isize, x: isize| {
-        let yy = y.clamp(0, h as isize - 1) as usize;
-        let xx = x.clamp(0, w as isize - 1) as usize;
-        heights[[yy, xx]]
-    };
+    let at = |y: isize, x: isize| heights[[index(y, h), index(x, w)]];
+    let (sx, sy) = (if w > 1 { 2.0 } else { 1.0 }, if h > 1 { 2.0 } else { 1.0 });
     let mut out = Array3::zeros((3, h, w));
     for y in 0..h as isize {
         for x in 0..w as isize {
-            let dx = (at(y, x + 1) - at(y, x - 1)) / if w > 1 { 2.0 } else { 1.0 };
-            let dr = (at(y + 1, x) - at(y - 1, x)) / if h > 1 { 2.0 } else { 1.0 };
+            let dx = (at(y, x + 1) - at(y, x - 1)) / sx;
+            let dr = (at(y + 1, x) - at(y - 1, x)) / sy;
             // y is up: dh/dy = -dh/drow.
             let n = [-dx, dr, 1.0];
             let len = (n[0] * n[0] + n[1] * n[1] + 1.0).sqrt();

@@ -207,7 +207,7 @@ impl Car3dModel {
     pub fn is_stable(&self, data_var: f64) -> bool {
         let mut probe = self.clone();
         probe.mean = [0.0; 3];
-        let sample = probe.synthesize(128, 128, 0x5eed);
+        let sample = probe.synthesize(128, 128, 0x5eed, false);
         bounded_sample(&sample, data_var / 3.0)
     }
 
@@ -230,11 +230,44 @@ impl Car3dModel {
 
     /// A `(3, rows, cols)` sample by the causal recursion with a burn-in margin; the same seed
     /// and size give the same driving noise for every model.
-    pub fn synthesize(&self, rows: usize, cols: usize, seed: u64) -> Array3<f64> {
+    pub fn synthesize(&self, rows: usize, cols: usize, seed: u64, tileable: bool) -> Array3<f64> {
         let offsets = causal(self.order as usize);
         let l = self.noise_factor();
         let a: Vec<Matrix3<f64>> = (0..offsets.len()).map(|k| self.a_matrix(k)).collect();
         let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        let mut innovation = || -> [f64; 3] {
+            let w: [f64; 3] = std::array::from_fn(|_| StandardNormal.sample(&mut rng));
+            std::array::from_fn(|p| (0..=p).map(|q| l[(p, q)] * w[q]).sum())
+        };
+        let apply = |acc: &mut [f64; 3], ak: &Matrix3<f64>, prev: [f64; 3]| {
+            for p in 0..3 {
+                acc[p] += ak[(p, 0)] * prev[0] + ak[(p, 1)] * prev[1] + ak[(p, 2)] * prev[2];
+            }
+        };
+        if rows == 0 || cols == 0 {
+            return Array3::zeros((3, rows, cols));
+        }
+        if tileable {
+            // Two raster passes on the torus, as for the 2D CAR: the second sees wrapped
+            // neighbours from the first, so the result tiles (approximately stationary).
+            let mut y = vec![[0.0f64; 3]; rows * cols];
+            for _pass in 0..2 {
+                for r in 0..rows {
+                    for c in 0..cols {
+                        let mut acc = innovation();
+                        for (ak, &(s1, s2)) in a.iter().zip(offsets) {
+                            let rr = (r as isize - s1).rem_euclid(rows as isize) as usize;
+                            let cc = (c as isize - s2).rem_euclid(cols as isize) as usize;
+                            apply(&mut acc, ak, y[rr * cols + cc]);
+                        }
+                        y[r * cols + c] = acc;
+                    }
+                }
+            }
+            return Array3::from_shape_fn((3, rows, cols), |(ch, r, c)| {
+                y[r * cols + c][ch] + self.mean[ch]
+            });
+        }
         let pad = 3;
         let width = pad + MARGIN + cols + MARGIN + pad;
         let height = pad + MARGIN + rows;
@@ -246,17 +279,9 @@ impl Car3dModel {
         for r in pad..height {
             for c in pad..width - pad {
                 let i = r * width + c;
-                let w: [f64; 3] = std::array::from_fn(|_| StandardNormal.sample(&mut rng));
-                let mut acc = [0.0; 3];
-                for p in 0..3 {
-                    acc[p] = (0..=p).map(|q| l[(p, q)] * w[q]).sum();
-                }
+                let mut acc = innovation();
                 for (ak, &off) in a.iter().zip(&lin) {
-                    let prev = y[i - off];
-                    for p in 0..3 {
-                        acc[p] +=
-                            ak[(p, 0)] * prev[0] + ak[(p, 1)] * prev[1] + ak[(p, 2)] * prev[2];
-                    }
+                    apply(&mut acc, ak, y[i - off]);
                 }
                 y[i] = acc;
             }
@@ -286,7 +311,7 @@ mod tests {
 
     #[test]
     fn estimates_recover_matrices_and_noise_covariance() {
-        let y = truth().synthesize(300, 300, 4);
+        let y = truth().synthesize(300, 300, 4, false);
         let fit = Car3dModel::fit(&y, 4);
         assert_eq!(fit.model.order, 1, "{:?}", fit.candidates);
         for (e, t) in fit.model.a.iter().zip(&truth().a) {
@@ -305,12 +330,17 @@ mod tests {
         assert_eq!(fit.model.order, 0);
         assert!(
             fit.model
-                .synthesize(16, 16, 1)
+                .synthesize(16, 16, 1, false)
                 .iter()
                 .all(|v| (v - 0.3).abs() < 1e-12)
         );
-        let tiny = truth().synthesize(4, 4, 2);
+        let tiny = truth().synthesize(4, 4, 2, false);
         let fit = Car3dModel::fit(&tiny, 4);
-        assert!(fit.model.synthesize(8, 8, 1).iter().all(|v| v.is_finite()));
+        assert!(
+            fit.model
+                .synthesize(8, 8, 1, false)
+                .iter()
+                .all(|v| v.is_finite())
+        );
     }
 }
