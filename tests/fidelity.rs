@@ -121,13 +121,7 @@ fn luminance_correlation(a: &Array3<f32>, b: &Array3<f32>) -> f64 {
             })
             .collect()
     };
-    let (a, b) = (lum(a), lum(b));
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let cov: f64 = a.iter().zip(&b).map(|(x, y)| (x - ma) * (y - mb)).sum();
-    let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
-    let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
-    cov / (va * vb).sqrt()
+    btfmrf::eval::correlation(&lum(a), &lum(b))
 }
 
 /// Coherence across lights: in the measured BTF the same texel shows the same surface under

@@ -3,18 +3,10 @@
 
 use btfmrf::btf::synthetic::{SyntheticBtf, SyntheticMaterial};
 use btfmrf::btf::{Btf, Direction, DirectionSet};
+use btfmrf::eval::correlation;
 use btfmrf::geometry::{estimate_normals, frankot_chellappa, frontal_view};
 use btfmrf::progress::NoProgress;
 use ndarray::{Array2, Axis};
-
-fn correlation(a: &Array2<f64>, b: &Array2<f64>) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.sum() / n, b.sum() / n);
-    let cov: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
-    let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
-    let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
-    cov / (va * vb).sqrt()
-}
 
 /// Mean and median angle between estimated and true normals, degrees.
 fn angular_error(est: &ndarray::Array3<f64>, truth: &ndarray::Array3<f32>) -> (f64, f64) {

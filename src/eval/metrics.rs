@@ -105,6 +105,32 @@ impl TextureStats {
     }
 }
 
+/// Pearson correlation of two equally long sequences (pixelwise agreement of two registered
+/// images; 0 when either is constant).
+pub fn correlation<'a>(
+    a: impl IntoIterator<Item = &'a f64> + Clone,
+    b: impl IntoIterator<Item = &'a f64> + Clone,
+) -> f64 {
+    let (mut n, mut sa, mut sb) = (0.0f64, 0.0, 0.0);
+    for (x, y) in a.clone().into_iter().zip(b.clone()) {
+        n += 1.0;
+        sa += x;
+        sb += y;
+    }
+    let (ma, mb) = (sa / n.max(1.0), sb / n.max(1.0));
+    let (mut cov, mut va, mut vb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.into_iter().zip(b) {
+        cov += (x - ma) * (y - mb);
+        va += (x - ma).powi(2);
+        vb += (y - mb).powi(2);
+    }
+    if va > 0.0 && vb > 0.0 {
+        cov / (va * vb).sqrt()
+    } else {
+        0.0
+    }
+}
+
 /// Compares two images (any sizes): see the module documentation.
 pub fn texture_fidelity(a: &Array3<f32>, b: &Array3<f32>) -> Fidelity {
     TextureStats::of(a).compare(&TextureStats::of(b))

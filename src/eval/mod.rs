@@ -2,4 +2,4 @@
 
 pub mod metrics;
 
-pub use metrics::{Fidelity, TextureStats, texture_fidelity};
+pub use metrics::{Fidelity, TextureStats, correlation, texture_fidelity};

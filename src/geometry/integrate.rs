@@ -104,15 +104,7 @@ fn normals_with(heights: &Array2<f64>, index: impl Fn(isize, usize) -> usize) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn correlation(a: &Array2<f64>, b: &Array2<f64>) -> f64 {
-        let n = a.len() as f64;
-        let (ma, mb) = (a.sum() / n, b.sum() / n);
-        let cov: f64 = a.iter().zip(b).map(|(x, y)| (x - ma) * (y - mb)).sum();
-        let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
-        let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
-        cov / (va * vb).sqrt()
-    }
+    use crate::eval::correlation;
 
     #[test]
     fn a_smooth_bump_is_recovered_from_its_normals() {

@@ -301,6 +301,7 @@ impl Car2dModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::eval::correlation;
 
     fn truth() -> Car2dModel {
         // Order 2 (4 neighbours), stable (sum |a| = 0.85).
@@ -399,18 +400,5 @@ mod tests {
                 .iter()
                 .all(|v| v.is_finite())
         );
-    }
-
-    pub(crate) fn correlation(a: &Array2<f64>, b: &Array2<f64>) -> f64 {
-        let n = a.len() as f64;
-        let (ma, mb) = (a.sum() / n, b.sum() / n);
-        let cov: f64 = a
-            .iter()
-            .zip(b.iter())
-            .map(|(x, y)| (x - ma) * (y - mb))
-            .sum();
-        let va: f64 = a.iter().map(|x| (x - ma).powi(2)).sum();
-        let vb: f64 = b.iter().map(|y| (y - mb).powi(2)).sum();
-        cov / (va * vb).sqrt()
     }
 }
