@@ -302,3 +302,21 @@ fn tileable_images_wrap_seamlessly() {
         }
     }
 }
+
+/// Any size: one 4096 x 4096 image from each model (about 5-10 s each in release; run with
+/// `scripts/test --ignored` or `cargo test --release --test model -- --ignored`).
+#[test]
+#[ignore = "large: 4096 x 4096 synthesis, several seconds per model"]
+fn synthesis_at_4096_squared() {
+    for m in models() {
+        let im = m
+            .synthesize_image(
+                &Direction::new(30.0, 45.0),
+                &Direction::new(45.0, 80.0),
+                &opts(4096, 9),
+            )
+            .unwrap();
+        assert_eq!(im.dim(), (3, 4096, 4096));
+        assert!(im.iter().all(|v| v.is_finite()), "{}", m.kind);
+    }
+}
