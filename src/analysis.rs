@@ -6,7 +6,7 @@ use ndarray::{Array3, Axis, stack};
 use rayon::prelude::*;
 
 use crate::btf::Btf;
-use crate::decompose::marginals;
+use crate::decompose::marginals::{self, Quantiles};
 use crate::decompose::pyramid::auto_levels;
 use crate::decompose::{ClusterOptions, KlBasis, Pyramid, SubspaceClustering};
 use crate::geometry;
@@ -82,6 +82,16 @@ pub fn analyze(
             format!("{} is outside 1..={MAX_ORDER}", options.max_order),
         ));
     }
+    if btf.views().len() > usize::from(u16::MAX) || btf.lights().len() > usize::from(u16::MAX) {
+        return Err(ModelError::parameter(
+            "btf",
+            format!(
+                "{} views x {} lights: a model holds at most 65535 of each",
+                btf.views().len(),
+                btf.lights().len()
+            ),
+        ));
+    }
     let (w, h) = (btf.width() as usize, btf.height() as usize);
     let levels = options.levels.unwrap_or_else(|| auto_levels(h, w, 16, 4));
     if levels == 0 || levels > usize::from(crate::model::format::MAX_LEVELS) {
@@ -106,8 +116,8 @@ pub fn analyze(
         .enumerate()
         .map(|(k, &(v, l))| {
             let image = btf.image(v, l)?;
-            let (kl, levels, notes) = fit_subspace(&image, options.kind, levels, options.max_order);
-            let marginals = kl.forward(&image).map(|plane| marginals::quantiles(&plane));
+            let (kl, marginals, levels, notes) =
+                fit_subspace(&image, options.kind, levels, options.max_order);
             progress.advance(1);
             let notes = notes
                 .into_iter()
@@ -174,47 +184,39 @@ fn estimate_range_map(
     })
 }
 
-/// Fits one subspace image: its colour basis (the identity for the 3D CAR), its level
-/// models, and notes on any repair.
+/// Fits one subspace image: its colour basis (the identity for the 3D CAR, which models the
+/// channels jointly), the quantiles of its factor planes, its level models, and repair notes.
 fn fit_subspace(
     image: &Array3<f32>,
     kind: ModelKind,
     levels: usize,
     max_order: usize,
-) -> (KlBasis, Vec<LevelModel>, Vec<String>) {
-    let mut notes = Vec::new();
-    match kind {
-        ModelKind::Car3d => {
-            let channels: Vec<Pyramid> = (0..3)
-                .map(|c| Pyramid::decompose(&image.index_axis(Axis(0), c).mapv(f64::from), levels))
-                .collect();
-            let models = (0..channels[0].bands.len())
-                .into_par_iter()
-                .map(|lv| {
-                    let views: Vec<_> = channels.iter().map(|p| p.bands[lv].view()).collect();
-                    let band = stack(Axis(0), &views).expect("equal band shapes");
-                    let fit = Car3dModel::fit(&band, max_order.min(MAX_ORDER_3D));
-                    (
-                        LevelModel::Joint(fit.model),
-                        fit.repair.map(|r| format!("level {lv}: {r}")),
-                    )
-                })
-                .collect::<Vec<_>>();
-            let mut out = Vec::new();
-            for (m, n) in models {
-                out.push(m);
-                notes.extend(n);
-            }
-            (KlBasis::identity(), out, notes)
-        }
+) -> (KlBasis, [Quantiles; 3], Vec<LevelModel>, Vec<String>) {
+    let kl = match kind {
+        ModelKind::Car3d => KlBasis::identity(),
+        ModelKind::Car2d | ModelKind::Gmrf => KlBasis::fit(image),
+    };
+    let factors = kl.forward(image);
+    let marginals = factors.each_ref().map(marginals::quantiles);
+    let pyramids: Vec<Pyramid> = factors
+        .iter()
+        .map(|f| Pyramid::decompose(f, levels))
+        .collect();
+    let n_levels = pyramids[0].bands.len();
+    let (models, notes): (Vec<LevelModel>, Vec<Option<String>>) = match kind {
+        ModelKind::Car3d => (0..n_levels)
+            .into_par_iter()
+            .map(|lv| {
+                let views: Vec<_> = pyramids.iter().map(|p| p.bands[lv].view()).collect();
+                let band = stack(Axis(0), &views).expect("equal band shapes");
+                let fit = Car3dModel::fit(&band, max_order.min(MAX_ORDER_3D));
+                (
+                    LevelModel::Joint(fit.model),
+                    fit.repair.map(|r| format!("level {lv}: {r}")),
+                )
+            })
+            .unzip(),
         ModelKind::Car2d | ModelKind::Gmrf => {
-            let kl = KlBasis::fit(image);
-            let pyramids: Vec<Pyramid> = kl
-                .forward(image)
-                .iter()
-                .map(|f| Pyramid::decompose(f, levels))
-                .collect();
-            let n_levels = pyramids[0].bands.len();
             let fits: Vec<(BandModel, Option<String>)> = (0..3 * n_levels)
                 .into_par_iter()
                 .map(|i| {
@@ -233,13 +235,14 @@ fn fit_subspace(
                     )
                 })
                 .collect();
-            let mut out = Vec::with_capacity(n_levels);
-            for lv in 0..n_levels {
-                let band = |factor: usize| fits[factor * n_levels + lv].0.clone();
-                out.push(LevelModel::Factors([band(0), band(1), band(2)]));
-            }
-            notes.extend(fits.into_iter().filter_map(|f| f.1));
-            (kl, out, notes)
+            let models = (0..n_levels)
+                .map(|lv| {
+                    let band = |factor: usize| fits[factor * n_levels + lv].0.clone();
+                    LevelModel::Factors([band(0), band(1), band(2)])
+                })
+                .collect();
+            (models, fits.into_iter().map(|f| f.1).collect())
         }
-    }
+    };
+    (kl, marginals, models, notes.into_iter().flatten().collect())
 }

@@ -8,6 +8,7 @@
 //! under every view and light, so a moving light does not make the texture boil.
 
 use std::collections::BTreeMap;
+use std::sync::OnceLock;
 
 use ndarray::{Array2, Array3, Axis};
 use rayon::prelude::*;
@@ -18,8 +19,8 @@ use crate::decompose::pyramid::{Taps, apply_separable};
 use crate::decompose::{Border, Pyramid};
 use crate::model::{BandModel, LevelModel, MaterialModel, ModelError, Result};
 
-/// The largest synthesized side, pixels.
-pub const MAX_SIDE: usize = 16_384;
+/// The largest synthesized side, pixels (a 4096^2 image peaks near 2 GB; 8192^2 near 8 GB).
+pub const MAX_SIDE: usize = 8192;
 
 /// Size and randomness of a synthesis.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -33,6 +34,22 @@ pub struct SynthesisOptions {
     /// Make the output tile seamlessly (exact for GMRF; two-pass toroidal for CAR models).
     /// Needs sizes divisible by `2^(levels - 1)`.
     pub tileable: bool,
+}
+
+/// Subspace images (made on first use) and range-map normals for one size and seed; see
+/// [`MaterialModel::synthesis_cache`].
+#[derive(Debug)]
+pub struct SynthesisCache {
+    options: SynthesisOptions,
+    subspaces: Vec<OnceLock<Array3<f32>>>,
+    normals: Option<Array3<f64>>,
+}
+
+impl SynthesisCache {
+    /// How many subspace images have been synthesized so far.
+    pub fn synthesized(&self) -> usize {
+        self.subspaces.iter().filter(|s| s.get().is_some()).count()
+    }
 }
 
 /// A seed for one band: mixes the user's seed with the band's identity (splitmix64).
@@ -197,17 +214,48 @@ impl MaterialModel {
         light: &Direction,
         o: &SynthesisOptions,
     ) -> Result<Array3<f32>> {
-        let weights = self.subspace_weights(view, light)?;
-        let parts: Vec<(f64, Array3<f32>)> = weights
-            .iter()
-            .map(|(&k, &w)| Ok((w, self.synthesize_subspace(k, o)?)))
-            .collect::<Result<_>>()?;
+        self.image_from_cache(&self.synthesis_cache(o)?, view, light)
+    }
+
+    /// An empty cache for synthesizing many images of one size and seed: each subspace image
+    /// is made once, on first use, and the range map's normals once, here.
+    ///
+    /// # Errors
+    /// An invalid size.
+    pub fn synthesis_cache(&self, o: &SynthesisOptions) -> Result<SynthesisCache> {
+        check(self, o)?;
+        Ok(SynthesisCache {
+            options: *o,
+            subspaces: (0..self.subspaces.len()).map(|_| OnceLock::new()).collect(),
+            normals: self.range_normals(o.rows, o.cols, o.tileable),
+        })
+    }
+
+    /// The BTF image for (view, light) as [`MaterialModel::synthesize_image`] makes it, drawing
+    /// subspace images from (and adding them to) `cache`, which must come from this model.
+    ///
+    /// # Errors
+    /// A non-finite direction.
+    pub fn image_from_cache(
+        &self,
+        cache: &SynthesisCache,
+        view: &Direction,
+        light: &Direction,
+    ) -> Result<Array3<f32>> {
+        let o = &cache.options;
         let mut out = Array3::<f32>::zeros((3, o.rows, o.cols));
-        for (w, part) in parts {
-            out.scaled_add(w as f32, &part);
+        for (k, w) in self.subspace_weights(view, light)? {
+            let part = match cache.subspaces[k].get() {
+                Some(part) => part,
+                None => {
+                    let made = self.synthesize_subspace(k, o)?;
+                    cache.subspaces[k].get_or_init(|| made)
+                }
+            };
+            out.scaled_add(w as f32, part);
         }
-        if let Some(normals) = self.range_normals(o.rows, o.cols, o.tileable) {
-            bump_relight(&mut out, &normals, light);
+        if let Some(normals) = &cache.normals {
+            bump_relight(&mut out, normals, light);
         }
         Ok(out)
     }

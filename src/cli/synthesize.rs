@@ -1,13 +1,12 @@
 //! `btfmrf synthesize`: images of any size from a `.btfm` model.
 
 use std::path::PathBuf;
-use std::sync::OnceLock;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use btfmrf::btf::{Btf, BtfError, Direction, DirectionSet, ImageFormat, ImageSource, io};
+use btfmrf::btf::{Btf, BtfError, Direction, DirectionSet, ImageSource, io};
 use btfmrf::model::{MaterialModel, format};
-use btfmrf::synthesis::{SynthesisOptions, bump_relight};
+use btfmrf::synthesis::{SynthesisCache, SynthesisOptions};
 use ndarray::Array3;
 
 use super::{Bar, Global, emit};
@@ -86,43 +85,23 @@ fn parse_direction(s: &str) -> Result<Direction, String> {
     Ok(Direction::new(theta, phi))
 }
 
-/// Synthesized images as a BTF: subspace images made once each, on first use.
+/// Synthesized images as a BTF, drawing on one synthesis cache.
 struct ModelSource {
     model: MaterialModel,
-    options: SynthesisOptions,
+    cache: SynthesisCache,
     views: DirectionSet,
     lights: DirectionSet,
-    subspaces: Vec<OnceLock<Result<Array3<f32>, String>>>,
-    normals: Option<Array3<f64>>,
 }
 
 impl ImageSource for ModelSource {
     fn load(&self, view: usize, light: usize) -> Result<Array3<f32>, BtfError> {
         let (v, l) = (self.views.as_slice()[view], self.lights.as_slice()[light]);
-        let fail = |e: String| BtfError::Image {
-            file: self.describe(view, light),
-            reason: e,
-        };
-        let weights = self
-            .model
-            .subspace_weights(&v, &l)
-            .map_err(|e| fail(e.to_string()))?;
-        let mut out = Array3::<f32>::zeros((3, self.options.rows, self.options.cols));
-        for (k, w) in weights {
-            let part = self.subspaces[k]
-                .get_or_init(|| {
-                    self.model
-                        .synthesize_subspace(k, &self.options)
-                        .map_err(|e| e.to_string())
-                })
-                .as_ref()
-                .map_err(|e| fail(e.clone()))?;
-            out.scaled_add(w as f32, part);
-        }
-        if let Some(n) = &self.normals {
-            bump_relight(&mut out, n, &l);
-        }
-        Ok(out)
+        self.model
+            .image_from_cache(&self.cache, &v, &l)
+            .map_err(|e| BtfError::Image {
+                file: self.describe(view, light),
+                reason: e.to_string(),
+            })
     }
 
     fn describe(&self, view: usize, light: usize) -> String {
@@ -181,11 +160,16 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         DirectionSet::new(args.light.clone())?
     };
     let total = model.subspaces.len();
+    // The subspace images these pairs draw on: exactly what the cache will synthesize.
+    let mut needed = std::collections::BTreeSet::new();
+    for v in &views {
+        for l in &lights {
+            needed.extend(model.subspace_weights(v, l)?.into_keys());
+        }
+    }
     let source = ModelSource {
-        subspaces: (0..total).map(|_| OnceLock::new()).collect(),
-        normals: model.range_normals(rows, cols, options.tileable),
+        cache: model.synthesis_cache(&options)?,
         model,
-        options,
         views: views.clone(),
         lights: lights.clone(),
     };
@@ -197,18 +181,18 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         rows as u32,
         Box::new(source),
     )?;
-    let format = match args.format {
-        super::FormatArg::Jpg => ImageFormat::Jpeg { quality: 90 },
-        super::FormatArg::Png => ImageFormat::Png,
-        super::FormatArg::Exr => ImageFormat::Exr,
-    };
-    io::write_ubo2003(&btf, &args.out, format, &Bar::new(global))?;
+    io::write_ubo2003(
+        &btf,
+        &args.out,
+        args.format.with_quality(90),
+        &Bar::new(global),
+    )?;
     let seconds = start.elapsed().as_secs_f64();
     report(
         args.json,
         &args.out,
         btf.image_count(),
-        total,
+        needed.len(),
         total,
         seconds,
     )

@@ -11,7 +11,7 @@ use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
 
 use super::neighbourhood::{MAX_ORDER, causal, reach};
-use super::{Car2dFit, choose_stable};
+use super::{Car2dFit, choose_stable, is_flat};
 
 /// Burn-in margin of the causal synthesis, pixels (fixed, so that every band of every
 /// subspace sees the same driving noise at the same position).
@@ -131,8 +131,7 @@ impl Car2dModel {
         let mean = band.iter().sum::<f64>() / n;
         let y = band.mapv(|v| v - mean);
         let var = y.iter().map(|v| v * v).sum::<f64>() / n;
-        let scale = mean.abs().max(var.sqrt()).max(1e-300);
-        if !var.is_finite() || var <= 1e-20 * scale * scale || var < 1e-30 {
+        if is_flat(mean.abs(), var) {
             return Car2dFit {
                 model: Self::constant(mean),
                 candidates: Vec::new(),

@@ -11,7 +11,7 @@ use rand_pcg::Pcg64Mcg;
 
 use super::car2d::{MARGIN, bounded_sample};
 use super::neighbourhood::{causal, reach};
-use super::{Car3dFit, choose_stable};
+use super::{Car3dFit, choose_stable, is_flat};
 
 /// Channels modelled jointly (RGB).
 pub const D: usize = 3;
@@ -69,11 +69,7 @@ impl Car3dModel {
             sigma: cov,
             mean,
         };
-        let scale = mean
-            .iter()
-            .fold(total_var.sqrt(), |m, v| m.max(v.abs()))
-            .max(1e-300);
-        if !total_var.is_finite() || total_var <= 1e-20 * scale * scale || total_var < 1e-30 {
+        if is_flat(mean.iter().fold(0.0, |m, v| m.max(v.abs())), total_var) {
             return Car3dFit {
                 model: Self {
                     sigma: [0.0; 9],

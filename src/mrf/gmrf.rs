@@ -10,8 +10,8 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
 
-use super::GmrfFit;
 use super::neighbourhood::{MAX_ORDER, causal};
+use super::{GmrfFit, is_flat};
 use crate::fft;
 
 /// (sin, cos) of `omega_k * s` for every frequency index k along one axis.
@@ -32,6 +32,20 @@ pub struct GmrfModel {
     pub sigma2: f64,
     /// Band mean.
     pub mean: f64,
+}
+
+/// The validity repair (mrf_math.md 3.4): if the smallest denominator is below [`MU_FLOOR`],
+/// shrink gamma by `kappa` so that it equals the floor. Since `1 - mu` is linear in gamma, the
+/// shrunk model's denominators are `1 - kappa (1 - mu)`, updated in place. Returns
+/// (old minimum, kappa) when a repair was needed.
+fn floor_spectrum(mu: &mut Array2<f64>) -> Option<(f64, f64)> {
+    let min = mu.iter().copied().fold(f64::INFINITY, f64::min);
+    if min >= MU_FLOOR {
+        return None;
+    }
+    let kappa = (1.0 - MU_FLOOR) / (1.0 - min);
+    mu.mapv_inplace(|m| 1.0 - kappa * (1.0 - m));
+    Some((min, kappa))
 }
 
 fn wrap(i: isize, n: usize) -> usize {
@@ -106,8 +120,7 @@ impl GmrfModel {
         let mean = band.iter().sum::<f64>() / t as f64;
         let y = band.mapv(|v| v - mean);
         let var = y.iter().map(|v| v * v).sum::<f64>() / t as f64;
-        let scale = mean.abs().max(var.sqrt()).max(1e-300);
-        if !var.is_finite() || var <= 1e-20 * scale * scale || var < 1e-30 {
+        if is_flat(mean.abs(), var) {
             return GmrfFit {
                 model: Self::constant(mean),
                 candidates: Vec::new(),
@@ -225,21 +238,16 @@ impl GmrfModel {
     /// else gamma shrunk so that the smallest denominator is [`MU_FLOOR`]; the note says what
     /// was done.
     pub fn made_valid(&self, rows: usize, cols: usize) -> (Self, Option<String>) {
-        let mu = self.denominators(rows.max(1), cols.max(1));
-        let min = mu.iter().copied().fold(f64::INFINITY, f64::min);
-        if min >= MU_FLOOR {
-            return (self.clone(), None);
+        let mut mu = self.denominators(rows.max(1), cols.max(1));
+        match floor_spectrum(&mut mu) {
+            None => (self.clone(), None),
+            Some((min, kappa)) => (
+                self.scaled(kappa),
+                Some(format!(
+                    "spectrum not positive (min {min:.3}); shrank gamma by {kappa:.3}"
+                )),
+            ),
         }
-        // 1 - mu is the neighbour sum; scaling gamma by kappa scales it by kappa.
-        let peak = mu.iter().map(|m| 1.0 - m).fold(f64::NEG_INFINITY, f64::max);
-        let kappa = (1.0 - MU_FLOOR) / peak;
-        let repaired = self.scaled(kappa);
-        (
-            repaired,
-            Some(format!(
-                "spectrum not positive (min {min:.3}); shrank gamma by {kappa:.3}"
-            )),
-        )
     }
 
     /// An exact sample on the `rows` x `cols` torus (it tiles seamlessly): white noise shaped
@@ -249,15 +257,9 @@ impl GmrfModel {
         if rows == 0 || cols == 0 {
             return Array2::zeros((rows, cols));
         }
-        // Check positivity on this very grid; shrinking gamma by kappa maps mu to
-        // 1 - kappa (1 - mu), so the repair needs no second pass over the frequencies.
+        // Positivity is checked on this very grid, which a different size samples differently.
         let mut mu = self.denominators(rows, cols);
-        let min = mu.iter().copied().fold(f64::INFINITY, f64::min);
-        if min < MU_FLOOR {
-            let peak = 1.0 - min;
-            let kappa = (1.0 - MU_FLOOR) / peak;
-            mu.mapv_inplace(|m| 1.0 - kappa * (1.0 - m));
-        }
+        floor_spectrum(&mut mu);
         // White noise is drawn directly in the frequency domain (circular complex Gaussian,
         // unit power per bin) instead of transforming a real noise field: one FFT instead of
         // two. The real part of the inverse transform, scaled by sqrt(2 M N), has exactly the

@@ -10,6 +10,13 @@ pub use car2d::Car2dModel;
 pub use car3d::Car3dModel;
 pub use gmrf::GmrfModel;
 
+/// True when a band's variance is nothing but rounding noise next to its level (or is not a
+/// number): such a band is stored as a constant, not modelled (mrf_math.md sec. 7, first row).
+pub(crate) fn is_flat(mean_magnitude: f64, var: f64) -> bool {
+    let scale = mean_magnitude.max(var.sqrt()).max(1e-300);
+    !var.is_finite() || var <= 1e-20 * scale * scale || var < 1e-30
+}
+
 /// A fitted band model, the score of every candidate neighbourhood, and any repair made.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Fit<M> {
