@@ -1,6 +1,7 @@
 //! Argument parsing (clap derive), one file per subcommand, and the terminal progress bar.
 
 mod analyze;
+mod bench;
 mod convert;
 mod generate;
 mod info;
@@ -50,6 +51,7 @@ enum Command {
     Convert(convert::Args),
     Analyze(analyze::Args),
     Synthesize(synthesize::Args),
+    Bench(bench::Args),
 }
 
 /// Parses the command line and runs the subcommand.
@@ -61,6 +63,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Convert(args) => convert::run(args, &cli.global),
         Command::Analyze(args) => analyze::run(args, &cli.global),
         Command::Synthesize(args) => synthesize::run(args, &cli.global),
+        Command::Bench(args) => bench::run(args, &cli.global),
     }
 }
 
