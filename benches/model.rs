@@ -16,6 +16,10 @@ use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
+/// The allocator of the `btfmrf` binary (src/main.rs), so that these figures are the binary's.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn fitted(kind: ModelKind) -> MaterialModel {
     let btf = Btf::synthetic(SyntheticMaterial::Sponge, 128, 1).expect("valid size");
     let options = AnalysisOptions {

@@ -4,6 +4,12 @@ mod cli;
 
 use std::process::ExitCode;
 
+/// mimalloc keeps freed pages for reuse. Synthesis allocates and frees many large planes, and
+/// the system allocator handed them back to the kernel each time: page faults were a quarter of
+/// a 1024 x 1024 synthesis (docs/BENCHMARKS.md).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn main() -> ExitCode {
     match cli::run() {
         Ok(()) => ExitCode::SUCCESS,
