@@ -5,7 +5,8 @@
 
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction, io};
-use ndarray::{Array3, s};
+use btfmrf::eval::montage::montage;
+use ndarray::Array3;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -27,15 +28,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         set.find(&Direction::new(t, p), 0.01)
             .ok_or("not a Bonn direction")
     };
-    let (n, gap) = (size as usize, 4);
-    let mut sheet = Array3::<f32>::ones((3, views.len() * (n + gap), lights.len() * (n + gap)));
-    for (r, &v) in views.iter().enumerate() {
-        for (c, &l) in lights.iter().enumerate() {
-            let image = btf.image(find(btf.views(), v)?, find(btf.lights(), l)?)?;
-            let (y, x) = (r * (n + gap), c * (n + gap));
-            sheet.slice_mut(s![.., y..y + n, x..x + n]).assign(&image);
+    let mut rows = Vec::new();
+    for &v in &views {
+        let mut row = Vec::new();
+        for &l in &lights {
+            row.push(btf.image(find(btf.views(), v)?, find(btf.lights(), l)?)?);
         }
+        rows.push(row);
     }
+    let rows: Vec<Vec<&Array3<f32>>> = rows.iter().map(|r| r.iter().collect()).collect();
+    let sheet = montage(&rows, 4);
     io::write_image(std::path::Path::new(out), &sheet)?;
     println!("{out}: rows = views {views:?}, columns = lights {lights:?}");
     Ok(())

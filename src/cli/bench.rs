@@ -63,7 +63,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         &args.btf.display().to_string(),
         &options,
         &Bar::new(global),
-    )?;
+    )?
+    .report;
     let plots = report.write(&args.out)?;
     if args.json {
         emit(serde_json::to_string(&report)?)?;

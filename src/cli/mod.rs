@@ -3,6 +3,7 @@
 mod analyze;
 mod bench;
 mod convert;
+mod demo;
 mod generate;
 mod info;
 mod synthesize;
@@ -52,6 +53,7 @@ enum Command {
     Analyze(analyze::Args),
     Synthesize(synthesize::Args),
     Bench(bench::Args),
+    Demo(demo::Args),
 }
 
 /// Parses the command line and runs the subcommand.
@@ -64,6 +66,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Analyze(args) => analyze::run(args, &cli.global),
         Command::Synthesize(args) => synthesize::run(args, &cli.global),
         Command::Bench(args) => bench::run(args, &cli.global),
+        Command::Demo(args) => demo::run(args, &cli.global),
     }
 }
 

@@ -314,6 +314,15 @@ fn human(bytes: u64) -> String {
     }
 }
 
+/// The benchmark's report and the models it fitted (for callers that go on to use them).
+#[derive(Debug)]
+pub struct BenchRun {
+    /// The measurements.
+    pub report: BenchReport,
+    /// The MRF models, in the order of [`ModelKind::ALL`].
+    pub mrf_models: Vec<MaterialModel>,
+}
+
 /// Runs every method this build knows on `btf` and gathers the report. `input` names the BTF
 /// in the report.
 ///
@@ -324,12 +333,15 @@ pub fn run(
     input: &str,
     options: &BenchOptions,
     progress: &dyn Progress,
-) -> Result<BenchReport> {
+) -> Result<BenchRun> {
     let mut methods = Vec::new();
+    let mut mrf_models = Vec::new();
     for kind in ModelKind::ALL {
-        methods.push(bench_mrf(btf, kind, options, progress)?.0);
+        let (result, model) = bench_mrf(btf, kind, options, progress)?;
+        methods.push(result);
+        mrf_models.push(model);
     }
-    Ok(BenchReport {
+    let report = BenchReport {
         input: input.to_string(),
         shape: [
             btf.views().len(),
@@ -340,7 +352,8 @@ pub fn run(
         raw_bytes: btf.raw_bytes(),
         fidelity_pairs: fidelity_pairs(btf, options.fidelity_pairs).len(),
         methods,
-    })
+    };
+    Ok(BenchRun { report, mrf_models })
 }
 
 impl BenchReport {

@@ -4,6 +4,7 @@
 pub mod bench;
 mod error;
 pub mod metrics;
+pub mod montage;
 pub mod plot;
 
 pub use error::{EvalError, Result};

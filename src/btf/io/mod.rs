@@ -213,7 +213,7 @@ pub(crate) fn temp_file_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
 }
 
 /// A temporary folder next to `path`, deleted if dropped; [`publish_dir`] gives it its name.
-pub(crate) fn temp_dir_beside(path: &Path) -> Result<tempfile::TempDir> {
+pub fn temp_dir_beside(path: &Path) -> Result<tempfile::TempDir> {
     if path.exists() {
         return Err(BtfError::io(
             path,
@@ -230,7 +230,7 @@ pub(crate) fn temp_dir_beside(path: &Path) -> Result<tempfile::TempDir> {
 }
 
 /// Renames a completed temporary folder to `path` (removing it if that fails).
-pub(crate) fn publish_dir(tmp: tempfile::TempDir, path: &Path) -> Result<()> {
+pub fn publish_dir(tmp: tempfile::TempDir, path: &Path) -> Result<()> {
     let kept = tmp.keep();
     std::fs::rename(&kept, path).map_err(|e| {
         let _ = std::fs::remove_dir_all(&kept);

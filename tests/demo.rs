@@ -1,0 +1,58 @@
+//! `btfmrf demo`: the main job end to end, at a small size.
+
+mod common;
+
+use common::{fails, ok, s, temp};
+
+#[test]
+fn demo_writes_the_report_with_its_images_models_and_benchmark() {
+    let dir = temp();
+    let out = dir.path().join("demo");
+    let stdout = ok(&[
+        "demo",
+        "--out",
+        s(&out),
+        "--material",
+        "knit",
+        "--size",
+        "32",
+        "--enlarge",
+        "96",
+    ]);
+    assert!(stdout.contains("report.md"), "{stdout}");
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    // Every image the report links exists and is a real image.
+    let links: Vec<&str> = md
+        .split("](")
+        .skip(1)
+        .filter_map(|rest| rest.split(')').next())
+        .collect();
+    assert!(links.len() >= 4, "{links:?}");
+    for link in &links {
+        let path = out.join(link);
+        assert!(path.exists(), "{link} is linked but missing");
+        if link.ends_with(".png") {
+            image::open(&path).unwrap_or_else(|e| panic!("{link}: {e}"));
+        }
+    }
+    // The enlargement is seamless-sized (a multiple of the pyramid step) and at least as large
+    // as asked; the comparison holds 3 lights x (measured + 3 models).
+    let big = image::open(out.join("enlarged-2dcar-96x96.png")).unwrap();
+    assert_eq!((big.width(), big.height()), (96, 96));
+    let sheet = image::open(out.join("comparison.png")).unwrap();
+    assert_eq!(sheet.width(), 4 * 64 + 3 * 6);
+    assert_eq!(sheet.height(), 3 * 64 + 2 * 6);
+    for model in ["gmrf", "2dcar", "3dcar"] {
+        let m = out.join("models").join(format!("{model}.btfm"));
+        assert!(std::fs::metadata(&m).unwrap().len() > 100, "{model}");
+        assert!(md.contains(&format!("| {model} |")), "table row {model}");
+    }
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("bench/report.json")).unwrap()).unwrap();
+    assert_eq!(report["shape"], serde_json::json!([81, 81, 32, 32]));
+
+    // An existing folder is refused and left alone.
+    let line = fails(&["demo", "--out", s(&out), "--size", "32"]);
+    assert!(line.contains("already exists"), "{line}");
+    assert!(out.join("report.md").exists());
+}
