@@ -2,8 +2,10 @@
 
 mod analyze;
 mod convert;
+mod features;
 mod generate;
 mod info;
+mod recognize;
 mod synthesize;
 
 use std::io::IsTerminal;
@@ -26,6 +28,8 @@ use btfmrf::progress::Progress;
 ///   btfmrf convert sponge.zip --out sponge-exr --format exr
 ///   btfmrf analyze sponge.zip --model 2dcar --out sponge.btfm
 ///   btfmrf synthesize sponge.btfm --size 1024 --view 0,0 --light 45,90 --out big.png
+///   btfmrf features brick.png --json
+///   btfmrf recognize --out recognition.md
 #[derive(Debug, Parser)]
 #[command(name = "btfmrf", version, verbatim_doc_comment)]
 pub struct Cli {
@@ -50,6 +54,8 @@ enum Command {
     Convert(convert::Args),
     Analyze(analyze::Args),
     Synthesize(synthesize::Args),
+    Features(features::Args),
+    Recognize(recognize::Args),
 }
 
 /// Parses the command line and runs the subcommand.
@@ -61,6 +67,8 @@ pub fn run() -> anyhow::Result<()> {
         Command::Convert(args) => convert::run(args, &cli.global),
         Command::Analyze(args) => analyze::run(args, &cli.global),
         Command::Synthesize(args) => synthesize::run(args, &cli.global),
+        Command::Features(args) => features::run(args, &cli.global),
+        Command::Recognize(args) => recognize::run(args, &cli.global),
     }
 }
 
