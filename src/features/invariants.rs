@@ -3,7 +3,7 @@
 //! functions over `f64` arrays; see the module docs of [`super`] for the maths.
 
 use nalgebra::{DMatrix, Matrix3, SymmetricEigen};
-use ndarray::{Array2, Array3, Axis};
+use ndarray::{Array3, Axis};
 
 use crate::mrf::neighbourhood::reach;
 use crate::mrf::{car2d, car3d, is_flat};
@@ -91,18 +91,23 @@ impl Whitening {
         Self { rows }
     }
 
-    /// The whitened, zero-mean `(k, h, w)` version of a `(3, h, w)` level (k = colour rank).
-    pub(super) fn apply(&self, level: &Array3<f64>) -> Array3<f64> {
-        let (_, h, w) = level.dim();
-        let mut out = Array3::<f64>::zeros((self.rows.len(), h, w));
-        for (mut plane, row) in out.outer_iter_mut().zip(&self.rows) {
-            for (c, &weight) in row.iter().enumerate() {
-                plane.scaled_add(weight, &level.index_axis(Axis(0), c));
-            }
-            let mean = plane.mean().unwrap_or(0.0);
-            plane.mapv_inplace(|v| v - mean);
+    /// The statistics of the whitened level from those of the raw level: `T V T^T` with
+    /// `T = diag(W, ..., W)` (`1 + eta` blocks, `W` is `k x 3`); `None` when the colour has
+    /// rank 0. Whitening commutes with the statistics because both are linear.
+    pub(super) fn congruence(&self, v: &DMatrix<f64>, eta: usize) -> Option<DMatrix<f64>> {
+        let k = self.rows.len();
+        if k == 0 {
+            return None;
         }
-        out
+        let mut t = DMatrix::<f64>::zeros(k * (1 + eta), D * (1 + eta));
+        for block in 0..=eta {
+            for (j, row) in self.rows.iter().enumerate() {
+                for (c, &weight) in row.iter().enumerate() {
+                    t[(block * k + j, block * D + c)] = weight;
+                }
+            }
+        }
+        Some(&t * v * t.transpose())
     }
 }
 
@@ -124,30 +129,60 @@ pub(super) fn car3d_len(eta: usize) -> usize {
     eta + 2 * D * eta + 1 + D
 }
 
-/// The 3D CAR invariants of one whitened zero-mean `(k, h, w)` level, `k <= 3`: `tr A_s` (per
-/// offset), the real parts and the absolute imaginary parts of the eigenvalues of every `A_s`
-/// (sorted descending, 3 per offset), `alpha3`, and the eigenvalues of `Sigma Phi^-1` (sorted
-/// descending). Missing colour directions, too small levels and failed fits count as white
-/// noise (eigenvalue 0, innovation share 1).
-pub(super) fn car3d_level(y: &Array3<f64>, offsets: &[(isize, isize)]) -> Vec<f64> {
+/// All features of one `(3, h, w)` pyramid level: the 3D CAR invariants of the whitened
+/// colours ([`car3d_invariants`]), then the 2D CAR `gamma` of R, G and B ([`car2d_gamma`]).
+/// One pass over the level: the raw 3-channel statistics hold the per-channel ones as
+/// principal sub-matrices, and the whitened ones by congruence.
+pub(super) fn level_features(
+    level: &Array3<f64>,
+    whitening: &Whitening,
+    offsets: &[(isize, isize)],
+) -> Vec<f64> {
     let eta = offsets.len();
-    let (k, h, w) = y.dim();
+    let (_, h, w) = level.dim();
     let (up, left, right) = reach(offsets);
     let sites = h.saturating_sub(up) * w.saturating_sub(left + right);
-    let fitted = if k == 0 || sites < 2 * D * eta {
-        None
-    } else {
-        let (mut v, _) = car3d::statistics(y, offsets);
+    let n = (h * w).max(1) as f64;
+    let means: Vec<f64> = level.outer_iter().map(|p| p.sum() / n).collect();
+    let mut centred = level.clone();
+    for (mut p, m) in centred.outer_iter_mut().zip(&means) {
+        p.mapv_inplace(|v| v - m);
+    }
+    let raw = (sites > 0).then(|| car3d::statistics(&centred, offsets).0);
+    let whitened = raw
+        .as_ref()
+        .filter(|_| sites >= 2 * D * eta)
+        .and_then(|v| whitening.congruence(v, eta));
+    let mut out = car3d_invariants(whitened, eta);
+    for (c, &mean) in means.iter().enumerate() {
+        let channel = raw.as_ref().filter(|_| sites >= 2 * eta).map(|v| {
+            let idx: Vec<usize> = (0..=eta).map(|b| b * D + c).collect();
+            v.select_rows(&idx).select_columns(&idx)
+        });
+        out.extend(car2d_gamma(channel, mean, sites, eta));
+    }
+    out
+}
+
+/// The 3D CAR invariants from the statistics `v` of a whitened level with `k <= 3` colour
+/// directions (`v` is `k (1 + eta)` square): `tr A_s` (per offset), the real parts and the
+/// absolute imaginary parts of the eigenvalues of every `A_s` (sorted descending, 3 per
+/// offset), `alpha3`, and the eigenvalues of `Sigma Phi^-1` (sorted descending). Missing
+/// colour directions, levels too small to fit (`None`) and failed fits count as white noise
+/// (eigenvalue 0, innovation share 1).
+pub(super) fn car3d_invariants(v: Option<DMatrix<f64>>, eta: usize) -> Vec<f64> {
+    let fitted = v.and_then(|mut v| {
         let dim = v.nrows();
+        let k = dim / (1 + eta);
         let ridge = RIDGE * v.trace() / dim as f64 + 1e-300;
         for i in 0..dim {
             v[(i, i)] += ridge;
         }
         car3d::estimate(&v, k, eta).map(|(gamma_t, lambda)| {
             let vyy = v.view((0, 0), (k, k)).into_owned();
-            (gamma_t, innovation_shares(&lambda, &vyy))
+            (k, gamma_t, innovation_shares(&lambda, &vyy))
         })
-    };
+    });
     let mut out = Vec::with_capacity(car3d_len(eta));
     let (traces, re, im, shares) = match fitted {
         None => (
@@ -156,7 +191,7 @@ pub(super) fn car3d_level(y: &Array3<f64>, offsets: &[(isize, isize)]) -> Vec<f6
             vec![0.0; D * eta],
             vec![1.0; D],
         ),
-        Some((gamma_t, shares)) => {
+        Some((k, gamma_t, shares)) => {
             let mut traces = Vec::with_capacity(eta);
             let (mut re, mut im) = (Vec::new(), Vec::new());
             for s in 0..eta {
@@ -224,22 +259,22 @@ pub(super) fn alpha3(shares: &[f64]) -> f64 {
     shares.iter().map(|s| 1.0 / s).sum::<f64>().sqrt()
 }
 
-/// The least-squares 2D CAR coefficients of one channel (mean removed; zeros for a flat
-/// channel or one too small for the neighbourhood). A gain on the channel scales `V` and the
-/// ridge alike, so `gamma` does not change.
-pub(super) fn car2d_gamma(band: &Array2<f64>, offsets: &[(isize, isize)]) -> Vec<f64> {
-    let eta = offsets.len();
-    let (h, w) = band.dim();
-    let n = (h * w).max(1) as f64;
-    let mean = band.sum() / n;
-    let y = band.mapv(|v| v - mean);
-    let var = y.iter().map(|v| v * v).sum::<f64>() / n;
-    let (up, left, right) = reach(offsets);
-    let sites = h.saturating_sub(up) * w.saturating_sub(left + right);
-    if is_flat(mean.abs(), var) || sites < 2 * eta {
+/// The least-squares 2D CAR coefficients of one channel from its statistics `v` (`1 + eta`
+/// square, index 0 = the pixel, mean removed; `None` when the level is too small) over
+/// `sites` sites; zeros for a flat channel. A gain on the channel scales `v` and the ridge
+/// alike, so `gamma` does not change.
+pub(super) fn car2d_gamma(
+    v: Option<DMatrix<f64>>,
+    mean: f64,
+    sites: usize,
+    eta: usize,
+) -> Vec<f64> {
+    let Some(mut v) = v else {
+        return vec![0.0; eta];
+    };
+    if is_flat(mean.abs(), v[(0, 0)] / sites.max(1) as f64) {
         return vec![0.0; eta];
     }
-    let (mut v, _) = car2d::statistics(&y, offsets);
     let ridge = RIDGE * v.trace() / (eta + 1) as f64 + 1e-300;
     for i in 0..=eta {
         v[(i, i)] += ridge;

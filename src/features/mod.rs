@@ -215,11 +215,7 @@ pub fn extract(image: &Array3<f32>, options: &FeatureOptions) -> Result<Features
         if l > 0 {
             level = reduce3(&level);
         }
-        values.extend(invariants::car3d_level(&whitening.apply(&level), offsets));
-        for ch in 0..D {
-            let band = level.index_axis(ndarray::Axis(0), ch).to_owned();
-            values.extend(invariants::car2d_gamma(&band, offsets));
-        }
+        values.extend(invariants::level_features(&level, &whitening, offsets));
     }
     values.extend(invariants::colour_statistics(&image));
     debug_assert_eq!(values.len(), options.len());

@@ -31,7 +31,7 @@ pub struct Car2dModel {
 }
 
 /// Accumulates `sum [Y; X][Y; X]^T` over the sites where `offsets` fit.
-pub(crate) fn statistics(y: &Array2<f64>, offsets: &[(isize, isize)]) -> (DMatrix<f64>, usize) {
+fn statistics(y: &Array2<f64>, offsets: &[(isize, isize)]) -> (DMatrix<f64>, usize) {
     let (h, w) = y.dim();
     let (up, left, right) = reach(offsets);
     let n = offsets.len() + 1;

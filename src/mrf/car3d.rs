@@ -44,32 +44,44 @@ pub(crate) fn statistics(y: &Array3<f64>, offsets: &[(isize, isize)]) -> (DMatri
     let (d, h, w) = y.dim();
     let (up, left, right) = reach(offsets);
     let dim = d + d * offsets.len();
-    let mut v = DMatrix::<f64>::zeros(dim, dim);
+    let y = y.as_standard_layout();
+    let data = y.as_slice().expect("standard layout");
+    let plane = h * w;
+    // Offsets as distances back in the flattened plane; sites start at row `up`, column
+    // `left`, so every neighbour index stays in range.
+    let back: Vec<usize> = offsets
+        .iter()
+        .map(|&(s1, s2)| (s1 * w as isize + s2) as usize)
+        .collect();
+    // Lower triangle, row-major in a flat buffer: the inner loop is a contiguous axpy.
+    let mut acc = vec![0.0; dim * dim];
     let mut z = vec![0.0; dim];
     let mut t = 0usize;
     for r in up..h {
         for x in left..w.saturating_sub(right) {
+            let i = r * w + x;
             for c in 0..d {
-                z[c] = y[[c, r, x]];
-            }
-            for (k, &(s1, s2)) in offsets.iter().enumerate() {
-                for c in 0..d {
-                    z[d + d * k + c] = y[[c, r - s1 as usize, (x as isize - s2) as usize]];
+                z[c] = data[c * plane + i];
+                for (k, &b) in back.iter().enumerate() {
+                    z[d + d * k + c] = data[c * plane + i - b];
                 }
             }
-            for i in 0..dim {
-                for j in 0..=i {
-                    v[(i, j)] += z[i] * z[j];
+            for a in 0..dim {
+                let za = z[a];
+                for (v, &zb) in acc[a * dim..=a * dim + a].iter_mut().zip(&z) {
+                    *v += za * zb;
                 }
             }
             t += 1;
         }
     }
-    for i in 0..dim {
-        for j in 0..i {
-            v[(j, i)] = v[(i, j)];
+    let v = DMatrix::from_fn(dim, dim, |i, j| {
+        if j <= i {
+            acc[i * dim + j]
+        } else {
+            acc[j * dim + i]
         }
-    }
+    });
     (v, t)
 }
 
