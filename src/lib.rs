@@ -35,6 +35,7 @@ pub mod btf;
 pub mod color;
 pub mod decompose;
 pub mod eval;
+pub mod features;
 mod fft;
 pub mod geometry;
 pub mod model;

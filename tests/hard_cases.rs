@@ -356,3 +356,74 @@ mod mrf_cases {
         assert!(model.range_map.is_some());
     }
 }
+
+/// Invariant features (issue 6) on images that break naive estimators: flat, saturated, tiny,
+/// one row, extreme dynamic range. Every vector must be finite and of full length.
+mod feature_cases {
+    use btfmrf::features::{FeatureError, FeatureOptions, extract};
+    use ndarray::Array3;
+
+    fn check(image: &Array3<f32>, what: &str) -> Vec<f64> {
+        let options = FeatureOptions::default();
+        let f = extract(image, &options).unwrap_or_else(|e| panic!("{what}: {e}"));
+        assert_eq!(f.values.len(), options.len(), "{what}");
+        assert!(
+            f.values.iter().all(|v| v.is_finite()),
+            "{what}: {:?}",
+            f.values
+        );
+        f.values
+    }
+
+    fn textured(h: usize, w: usize) -> Array3<f32> {
+        Array3::from_shape_fn((3, h, w), |(c, r, x)| {
+            let v = ((r * 7 + x * 13 + c * 5) % 11) as f32 / 11.0;
+            0.1 + 0.8 * v * (1.0 - 0.2 * c as f32)
+        })
+    }
+
+    #[test]
+    fn flat_saturated_and_black_images_give_the_white_noise_features() {
+        let flat = check(&Array3::from_elem((3, 32, 32), 0.4), "flat");
+        let saturated = check(&Array3::from_elem((3, 32, 32), 1.0), "saturated");
+        let black = check(&Array3::zeros((3, 32, 32)), "black");
+        assert_eq!(flat, saturated);
+        assert_eq!(flat, black);
+        // Mostly clipped: a texture pushed three stops over.
+        let clipped = textured(64, 64).mapv(|v| (8.0 * v).min(1.0));
+        check(&clipped, "clipped");
+    }
+
+    #[test]
+    fn tiny_thin_and_extreme_images_stay_finite() {
+        check(&textured(8, 8), "8x8");
+        check(&textured(1, 1), "1x1");
+        check(&textured(1, 256), "one row");
+        check(&textured(256, 2), "two columns");
+        check(&textured(64, 64).mapv(|v| v * 1e-30), "1e-30");
+        check(&textured(64, 64).mapv(|v| v * 1e30), "1e30");
+        // One bright pixel in a black image.
+        let mut spike = Array3::zeros((3, 16, 16));
+        spike[[1, 5, 5]] = 1.0;
+        check(&spike, "spike");
+    }
+
+    #[test]
+    fn empty_and_non_finite_images_are_errors_not_panics() {
+        let options = FeatureOptions::default();
+        assert!(matches!(
+            extract(&Array3::zeros((3, 0, 5)), &options),
+            Err(FeatureError::Shape(_))
+        ));
+        assert!(matches!(
+            extract(&Array3::zeros((1, 4, 4)), &options),
+            Err(FeatureError::Shape(_))
+        ));
+        let mut nan = textured(8, 8);
+        nan[[2, 3, 4]] = f32::NAN;
+        assert_eq!(
+            extract(&nan, &options),
+            Err(FeatureError::NotFinite(2, 3, 4))
+        );
+    }
+}

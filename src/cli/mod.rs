@@ -4,8 +4,10 @@ mod analyze;
 mod bench;
 mod convert;
 mod demo;
+mod features;
 mod generate;
 mod info;
+mod recognize;
 mod synthesize;
 
 use std::io::IsTerminal;
@@ -28,6 +30,8 @@ use btfmrf::progress::Progress;
 ///   btfmrf convert sponge.zip --out sponge-exr --format exr
 ///   btfmrf analyze sponge.zip --model 2dcar --out sponge.btfm
 ///   btfmrf synthesize sponge.btfm --size 1024 --view 0,0 --light 45,90 --out big.png
+///   btfmrf features brick.png --json
+///   btfmrf recognize --out recognition.md
 #[derive(Debug, Parser)]
 #[command(name = "btfmrf", version, verbatim_doc_comment)]
 pub struct Cli {
@@ -54,6 +58,8 @@ enum Command {
     Synthesize(synthesize::Args),
     Bench(bench::Args),
     Demo(demo::Args),
+    Features(features::Args),
+    Recognize(recognize::Args),
 }
 
 /// Parses the command line and runs the subcommand.
@@ -67,6 +73,8 @@ pub fn run() -> anyhow::Result<()> {
         Command::Synthesize(args) => synthesize::run(args, &cli.global),
         Command::Bench(args) => bench::run(args, &cli.global),
         Command::Demo(args) => demo::run(args, &cli.global),
+        Command::Features(args) => features::run(args, &cli.global),
+        Command::Recognize(args) => recognize::run(args, &cli.global),
     }
 }
 

@@ -67,7 +67,7 @@ fn parse_size(s: &str) -> Result<(usize, usize), String> {
 }
 
 /// Parses "theta,phi" in degrees.
-fn parse_direction(s: &str) -> Result<Direction, String> {
+pub(super) fn parse_direction(s: &str) -> Result<Direction, String> {
     let (t, p) = s
         .split_once(',')
         .ok_or_else(|| format!("'{s}' is not theta,phi"))?;

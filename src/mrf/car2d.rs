@@ -71,7 +71,7 @@ const MIN_SITES_PER_PARAMETER: usize = 20;
 
 /// Estimates gamma and lambda for the first `eta` neighbours from the full statistics `v`
 /// (index 0 is Y), with the ridge prior already added. Returns (gamma, lambda, ln|V_x|).
-fn estimate(v: &DMatrix<f64>, eta: usize) -> Option<(Vec<f64>, f64, f64)> {
+pub(crate) fn estimate(v: &DMatrix<f64>, eta: usize) -> Option<(Vec<f64>, f64, f64)> {
     let vx = v.view((1, 1), (eta, eta)).into_owned();
     let vxy = DVector::from_iterator(eta, (1..=eta).map(|i| v[(i, 0)]));
     let chol = vx.cholesky()?;

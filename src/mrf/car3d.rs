@@ -37,6 +37,72 @@ fn ln_det_spd(m: &DMatrix<f64>) -> Option<f64> {
     Some(2.0 * chol.l().diagonal().iter().map(|d| d.ln()).sum::<f64>())
 }
 
+/// Accumulates `V = sum_r z_r z_r^T` with `z_r = [Y_r; Y_{r-s_1}; ...; Y_{r-s_eta}]` over the
+/// sites where every offset fits, for a zero-mean `(d, h, w)` band with any number `d` of
+/// channels (mrf_math.md 4.2). `V` is `(d + d eta)` square; returns it with the site count `t`.
+pub(crate) fn statistics(y: &Array3<f64>, offsets: &[(isize, isize)]) -> (DMatrix<f64>, usize) {
+    let (d, h, w) = y.dim();
+    let (up, left, right) = reach(offsets);
+    let dim = d + d * offsets.len();
+    let y = y.as_standard_layout();
+    let data = y.as_slice().expect("standard layout");
+    let plane = h * w;
+    // Offsets as distances back in the flattened plane; sites start at row `up`, column
+    // `left`, so every neighbour index stays in range.
+    let back: Vec<usize> = offsets
+        .iter()
+        .map(|&(s1, s2)| (s1 * w as isize + s2) as usize)
+        .collect();
+    // Lower triangle, row-major in a flat buffer: the inner loop is a contiguous axpy.
+    let mut acc = vec![0.0; dim * dim];
+    let mut z = vec![0.0; dim];
+    let mut t = 0usize;
+    for r in up..h {
+        for x in left..w.saturating_sub(right) {
+            let i = r * w + x;
+            for c in 0..d {
+                z[c] = data[c * plane + i];
+                for (k, &b) in back.iter().enumerate() {
+                    z[d + d * k + c] = data[c * plane + i - b];
+                }
+            }
+            for a in 0..dim {
+                let za = z[a];
+                for (v, &zb) in acc[a * dim..=a * dim + a].iter_mut().zip(&z) {
+                    *v += za * zb;
+                }
+            }
+            t += 1;
+        }
+    }
+    let v = DMatrix::from_fn(dim, dim, |i, j| {
+        if j <= i {
+            acc[i * dim + j]
+        } else {
+            acc[j * dim + i]
+        }
+    });
+    (v, t)
+}
+
+/// The least-squares (or, with a prior already added to `v`, Bayesian) estimate for the first
+/// `eta` neighbours from statistics `v` of a `d`-channel band (see [`statistics`]):
+/// `gamma^T = V_zz^-1 V_zy` (`d eta` x `d`, row `d k + c'` column `c` is `A_k[c][c']`) and
+/// `lambda = V_yy - V_zy^T gamma^T` (`d` x `d`). `None` when `V_zz` is not positive definite.
+pub(crate) fn estimate(
+    v: &DMatrix<f64>,
+    d: usize,
+    eta: usize,
+) -> Option<(DMatrix<f64>, DMatrix<f64>)> {
+    let m = d * eta;
+    let vzz = v.view((d, d), (m, m)).into_owned();
+    let vzy = v.view((d, 0), (m, d)).into_owned();
+    let vyy = v.view((0, 0), (d, d)).into_owned();
+    let gamma_t = vzz.cholesky()?.solve(&vzy);
+    let lambda = vyy - vzy.transpose() * &gamma_t;
+    Some((gamma_t, lambda))
+}
+
 impl Car3dModel {
     /// The 3x3 matrix of neighbour `k`.
     fn a_matrix(&self, k: usize) -> Matrix3<f64> {
@@ -95,34 +161,8 @@ impl Car3dModel {
         }
         let offsets = causal(feasible);
         let eta_max = offsets.len();
-        let (up, left, right) = reach(offsets);
-        let dim = D + D * eta_max;
-        let mut v = DMatrix::<f64>::zeros(dim, dim);
-        let mut z = vec![0.0; dim];
-        let mut t = 0usize;
-        for r in up..h {
-            for x in left..w - right {
-                for c in 0..D {
-                    z[c] = y[[c, r, x]];
-                }
-                for (k, &(s1, s2)) in offsets.iter().enumerate() {
-                    for c in 0..D {
-                        z[D + D * k + c] = y[[c, r - s1 as usize, (x as isize - s2) as usize]];
-                    }
-                }
-                for i in 0..dim {
-                    for j in 0..=i {
-                        v[(i, j)] += z[i] * z[j];
-                    }
-                }
-                t += 1;
-            }
-        }
-        for i in 0..dim {
-            for j in 0..i {
-                v[(j, i)] = v[(i, j)];
-            }
-        }
+        let (mut v, t) = statistics(&y, offsets);
+        let dim = v.nrows();
         let ridge = 1e-6 * (D..dim).map(|i| v[(i, i)]).sum::<f64>() / (dim - D) as f64 + 1e-300;
         for i in 0..dim {
             v[(i, i)] += ridge;
@@ -135,13 +175,9 @@ impl Car3dModel {
             let eta = causal(k).len();
             let m = D * eta;
             let vzz = v.view((D, D), (m, m)).into_owned();
-            let vzy = v.view((D, 0), (m, D)).into_owned();
-            let vyy = v.view((0, 0), (D, D)).into_owned();
-            let Some(chol) = vzz.clone().cholesky() else {
+            let Some((gamma_t, mut lambda)) = estimate(&v, D, eta) else {
                 continue;
             };
-            let gamma_t = chol.solve(&vzy); // (d eta) x d: gamma^T
-            let mut lambda = vyy - vzy.transpose() * &gamma_t;
             for i in 0..D {
                 lambda[(i, i)] = lambda[(i, i)].max(ridge);
             }
