@@ -2,9 +2,12 @@
 
 mod analyze;
 mod convert;
+mod demo;
 mod generate;
 mod info;
+mod render;
 mod synthesize;
+mod view;
 
 use std::io::IsTerminal;
 
@@ -26,6 +29,7 @@ use btfmrf::progress::Progress;
 ///   btfmrf convert sponge.zip --out sponge-exr --format exr
 ///   btfmrf analyze sponge.zip --model 2dcar --out sponge.btfm
 ///   btfmrf synthesize sponge.btfm --size 1024 --view 0,0 --light 45,90 --out big.png
+///   btfmrf render sponge.btfm --out sphere.png --mesh sphere --mapping bump
 #[derive(Debug, Parser)]
 #[command(name = "btfmrf", version, verbatim_doc_comment)]
 pub struct Cli {
@@ -50,6 +54,9 @@ enum Command {
     Convert(convert::Args),
     Analyze(analyze::Args),
     Synthesize(synthesize::Args),
+    Render(render::Args),
+    View(view::Args),
+    Demo(demo::Args),
 }
 
 /// Parses the command line and runs the subcommand.
@@ -61,6 +68,9 @@ pub fn run() -> anyhow::Result<()> {
         Command::Convert(args) => convert::run(args, &cli.global),
         Command::Analyze(args) => analyze::run(args, &cli.global),
         Command::Synthesize(args) => synthesize::run(args, &cli.global),
+        Command::Render(args) => render::run(args, &cli.global),
+        Command::View(args) => view::run(args, &cli.global),
+        Command::Demo(args) => demo::run(args, &cli.global),
     }
 }
 

@@ -54,7 +54,7 @@ pub struct Args {
 }
 
 /// Parses "N" or "WxH" into (rows, cols).
-fn parse_size(s: &str) -> Result<(usize, usize), String> {
+pub(super) fn parse_size(s: &str) -> Result<(usize, usize), String> {
     let parse = |t: &str| {
         t.trim()
             .parse::<usize>()
@@ -67,7 +67,7 @@ fn parse_size(s: &str) -> Result<(usize, usize), String> {
 }
 
 /// Parses "theta,phi" in degrees.
-fn parse_direction(s: &str) -> Result<Direction, String> {
+pub(super) fn parse_direction(s: &str) -> Result<Direction, String> {
     let (t, p) = s
         .split_once(',')
         .ok_or_else(|| format!("'{s}' is not theta,phi"))?;
