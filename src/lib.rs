@@ -41,4 +41,5 @@ pub mod geometry;
 pub mod model;
 pub mod mrf;
 pub mod progress;
+pub mod render;
 pub mod synthesis;

@@ -50,6 +50,22 @@ impl SynthesisCache {
     pub fn synthesized(&self) -> usize {
         self.subspaces.iter().filter(|s| s.get().is_some()).count()
     }
+
+    /// The size and seed of every image in this cache.
+    pub fn options(&self) -> &SynthesisOptions {
+        &self.options
+    }
+
+    /// Subspace image `k` if it has been synthesized already.
+    pub fn get(&self, k: usize) -> Option<&Array3<f32>> {
+        self.subspaces.get(k).and_then(|s| s.get())
+    }
+
+    /// Unit normals of the range map at the cache's size, shape (3, rows, cols); `None` without
+    /// a range map.
+    pub fn normals(&self) -> Option<&Array3<f64>> {
+        self.normals.as_ref()
+    }
 }
 
 /// A seed for one band: mixes the user's seed with the band's identity (splitmix64).
@@ -245,19 +261,51 @@ impl MaterialModel {
         let o = &cache.options;
         let mut out = Array3::<f32>::zeros((3, o.rows, o.cols));
         for (k, w) in self.subspace_weights(view, light)? {
-            let part = match cache.subspaces[k].get() {
-                Some(part) => part,
-                None => {
-                    let made = self.synthesize_subspace(k, o)?;
-                    cache.subspaces[k].get_or_init(|| made)
-                }
-            };
-            out.scaled_add(w as f32, part);
+            out.scaled_add(w as f32, self.subspace_from_cache(cache, k)?);
         }
         if let Some(normals) = &cache.normals {
             bump_relight(&mut out, normals, light);
         }
         Ok(out)
+    }
+
+    /// Subspace image `k` from `cache` (which must come from this model), synthesized on
+    /// first use.
+    ///
+    /// # Errors
+    /// `k` out of range.
+    pub fn subspace_from_cache<'a>(
+        &self,
+        cache: &'a SynthesisCache,
+        k: usize,
+    ) -> Result<&'a Array3<f32>> {
+        let slot = cache.subspaces.get(k).ok_or_else(|| {
+            ModelError::parameter("subspace", format!("{k} of {}", cache.subspaces.len()))
+        })?;
+        match slot.get() {
+            Some(part) => Ok(part),
+            None => {
+                let made = self.synthesize_subspace(k, &cache.options)?;
+                Ok(slot.get_or_init(|| made))
+            }
+        }
+    }
+
+    /// A cache (see [`MaterialModel::synthesis_cache`]) holding exactly the subspace images
+    /// `clusters`, synthesized now, in parallel; the others stay unsynthesized.
+    ///
+    /// # Errors
+    /// An invalid size or a cluster index out of range.
+    pub fn synthesis_cache_for(
+        &self,
+        clusters: &[usize],
+        o: &SynthesisOptions,
+    ) -> Result<SynthesisCache> {
+        let cache = self.synthesis_cache(o)?;
+        clusters
+            .par_iter()
+            .try_for_each(|&k| self.subspace_from_cache(&cache, k).map(|_| ()))?;
+        Ok(cache)
     }
 
     /// The range map over `rows` x `cols` output texels (mirror-tiled, bilinearly upsampled from

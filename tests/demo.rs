@@ -18,6 +18,8 @@ fn demo_writes_the_report_with_its_images_models_and_benchmark() {
         "32",
         "--enlarge",
         "96",
+        "--render-size",
+        "64",
     ]);
     assert!(stdout.contains("report.md"), "{stdout}");
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
@@ -27,7 +29,12 @@ fn demo_writes_the_report_with_its_images_models_and_benchmark() {
         .skip(1)
         .filter_map(|rest| rest.split(')').next())
         .collect();
-    assert!(links.len() >= 4, "{links:?}");
+    assert!(links.len() >= 4 + 12, "{links:?}");
+    let renders = links.iter().filter(|l| l.starts_with("renders/")).count();
+    assert_eq!(
+        renders, 12,
+        "sphere and cloth x bump and displacement x 3 lights"
+    );
     for link in &links {
         let path = out.join(link);
         assert!(path.exists(), "{link} is linked but missing");

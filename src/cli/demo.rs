@@ -1,6 +1,6 @@
 //! `btfmrf demo`: the main job, end to end, on a built-in material.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
@@ -10,6 +10,8 @@ use btfmrf::btf::{Btf, Direction, ImageFormat};
 use btfmrf::eval::bench::{self, BenchOptions};
 use btfmrf::eval::montage::montage;
 use btfmrf::model::{MaterialModel, ModelKind, format};
+use btfmrf::render::headless::ModelRenderOptions;
+use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
 use btfmrf::synthesis::SynthesisOptions;
 use ndarray::Array3;
 
@@ -39,10 +41,16 @@ pub struct Args {
     /// Side of the seamless enlargement, pixels.
     #[arg(long, default_value_t = 2048)]
     enlarge: usize,
+    /// Side of the rendered images, pixels.
+    #[arg(long, default_value_t = 384)]
+    render_size: u32,
     /// Seed of every random step.
     #[arg(long, default_value_t = 1)]
     seed: u64,
 }
+
+/// Lights of the rendered objects, (theta, phi) in degrees.
+const RENDER_LIGHTS: [(f64, f64); 3] = [(30.0, 300.0), (60.0, 200.0), (75.0, 60.0)];
 
 /// The lights of the comparisons, (theta, phi) in degrees: Bonn directions.
 const LIGHTS: [(f64, f64); 3] = [(30.0, 0.0), (60.0, 90.0), (75.0, 210.0)];
@@ -54,7 +62,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let bar = Bar::new(global);
     let step = |n: usize, what: &str| {
         if !global.quiet {
-            eprintln!("demo [{n}/4] {what}");
+            eprintln!("demo [{n}/5] {what}");
         }
     };
 
@@ -97,14 +105,18 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let comparison = comparison(&btf, &run.mrf_models, args.seed)?;
     io::write_image(&dir.join("comparison.png"), &comparison)?;
 
-    step(4, "writing the report");
-    let md = report(
+    step(4, "rendering objects (wgpu)");
+    let renders = renders(car2d, dir, &args)?;
+
+    step(5, "writing the report");
+    let mut md = report(
         &args,
         &run.report.markdown(&[]),
         &plots,
         &enlarged_file,
         start,
     );
+    md.push_str(&renders);
     io::write_file_atomic(&dir.join("report.md"), md.as_bytes())?;
     publish_dir(tmp, &args.out)?;
     emit(format!(
@@ -113,6 +125,62 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         start.elapsed().as_secs_f64()
     ))?;
     Ok(())
+}
+
+/// A sphere and a cloth under three lights with bump and displacement mapping; returns the
+/// report's section (a table of the images, with what each scene needed synthesized).
+fn renders(model: &MaterialModel, dir: &Path, args: &Args) -> anyhow::Result<String> {
+    let renderer = Renderer::new()?;
+    let mut md = format!(
+        "## Rendered on objects ({})\n\n\
+         The 2D CAR model on a sphere and a draped cloth, camera at (35, 270), point light at \
+         distance 4. Only the subspace images the scene's view/light pairs touch are \
+         synthesized, at the resolution the screen footprint needs.\n\n\
+         | mesh | mapping | light | image | subspaces synthesized | texture | render s |\n\
+         |---|---|---|---|---|---|---:|\n",
+        renderer.ctx.describe()
+    );
+    std::fs::create_dir(dir.join("renders")).context("creating renders/")?;
+    for kind in [MeshKind::Sphere, MeshKind::Cloth] {
+        for mapping in [Mapping::Bump, Mapping::Displacement] {
+            let detail = if mapping == Mapping::Displacement {
+                384
+            } else {
+                64
+            };
+            let mesh = kind.build(detail, 1.0)?;
+            for (theta, phi) in RENDER_LIGHTS {
+                let light = Direction::new(theta, phi);
+                let scene = Scene {
+                    camera: Camera::orbit(Direction::new(35.0, 270.0), 3.4),
+                    light: Light {
+                        direction: light,
+                        distance: Some(4.0),
+                    },
+                    width: args.render_size,
+                    height: args.render_size,
+                };
+                let options = ModelRenderOptions {
+                    mapping,
+                    seed: args.seed,
+                    ..Default::default()
+                };
+                let r = renderer.render_model(model, &mesh, &scene, &options)?;
+                let name = format!("renders/{kind}-{mapping}-light{theta:.0}-{phi:.0}.png");
+                io::write_image(&dir.join(&name), &r.image)?;
+                md.push_str(&format!(
+                    "| {kind} | {mapping} | {theta:.0}, {phi:.0} | ![{name}]({name}) | {} of {} \
+                     | {}^2 | {:.2} |\n",
+                    r.plan.clusters.len(),
+                    r.subspaces_total,
+                    r.plan.texture_size,
+                    r.render_seconds
+                ));
+            }
+        }
+    }
+    md.push('\n');
+    Ok(md)
 }
 
 fn model_of(models: &[MaterialModel], kind: ModelKind) -> anyhow::Result<&MaterialModel> {

@@ -8,7 +8,9 @@ mod features;
 mod generate;
 mod info;
 mod recognize;
+mod render;
 mod synthesize;
+mod view;
 
 use std::io::IsTerminal;
 
@@ -32,6 +34,7 @@ use btfmrf::progress::Progress;
 ///   btfmrf synthesize sponge.btfm --size 1024 --view 0,0 --light 45,90 --out big.png
 ///   btfmrf features brick.png --json
 ///   btfmrf recognize --out recognition.md
+///   btfmrf render sponge.btfm --out sphere.png --mesh sphere --mapping bump
 #[derive(Debug, Parser)]
 #[command(name = "btfmrf", version, verbatim_doc_comment)]
 pub struct Cli {
@@ -60,6 +63,8 @@ enum Command {
     Demo(demo::Args),
     Features(features::Args),
     Recognize(recognize::Args),
+    Render(render::Args),
+    View(view::Args),
 }
 
 /// Parses the command line and runs the subcommand.
@@ -75,6 +80,8 @@ pub fn run() -> anyhow::Result<()> {
         Command::Demo(args) => demo::run(args, &cli.global),
         Command::Features(args) => features::run(args, &cli.global),
         Command::Recognize(args) => recognize::run(args, &cli.global),
+        Command::Render(args) => render::run(args, &cli.global),
+        Command::View(args) => view::run(args, &cli.global),
     }
 }
 

@@ -54,7 +54,7 @@ pub struct Args {
 }
 
 /// Parses "N" or "WxH" into (rows, cols).
-fn parse_size(s: &str) -> Result<(usize, usize), String> {
+pub(super) fn parse_size(s: &str) -> Result<(usize, usize), String> {
     let parse = |t: &str| {
         t.trim()
             .parse::<usize>()

@@ -1,0 +1,81 @@
+//! Frame times of the renderer at 800 x 800: MRF bump mapping, MRF displacement mapping, and
+//! a plain textured render of the same sphere (the ratio's baseline). Each frame includes the
+//! readback of the 800 x 800 float target. On a machine without a GPU this measures Mesa's
+//! lavapipe (see docs/BENCHMARKS.md, "Rendering").
+
+use std::hint::black_box;
+use std::path::Path;
+
+use btfmrf::btf::Direction;
+use btfmrf::model::format;
+use btfmrf::render::pipeline::{GpuMaterial, GpuMesh, MaterialTables};
+use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
+use btfmrf::synthesis::SynthesisOptions;
+use criterion::{Criterion, criterion_group, criterion_main};
+
+fn frames(c: &mut Criterion) {
+    let renderer = match Renderer::new() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("skipping the render benchmarks: {e}");
+            return;
+        }
+    };
+    eprintln!("adapter: {}", renderer.ctx.describe());
+    let model =
+        format::read(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sponge64.btfm"))
+            .expect("the golden model");
+    let n = 512;
+    let all: Vec<usize> = (0..model.subspaces.len()).collect();
+    let cache = model
+        .synthesis_cache_for(
+            &all,
+            &SynthesisOptions {
+                rows: n,
+                cols: n,
+                seed: 1,
+                tileable: true,
+            },
+        )
+        .unwrap();
+    let tables = MaterialTables::new(&model, &cache, None).unwrap();
+    let heights = model.range_heights(n, n, true);
+    let material = GpuMaterial::new(
+        &renderer.ctx,
+        &renderer.pipelines,
+        &cache,
+        heights.as_ref(),
+        &tables,
+    )
+    .unwrap();
+    let scene = Scene {
+        camera: Camera::orbit(Direction::new(30.0, 270.0), 3.2),
+        light: Light {
+            direction: Direction::new(45.0, 300.0),
+            distance: Some(4.0),
+        },
+        width: 800,
+        height: 800,
+    };
+    let coarse = GpuMesh::new(&renderer.ctx, &MeshKind::Sphere.build(64, 1.0).unwrap());
+    let fine = GpuMesh::new(&renderer.ctx, &MeshKind::Sphere.build(384, 1.0).unwrap());
+    let mut group = c.benchmark_group("render 800x800 sphere");
+    group.sample_size(10);
+    for (name, mapping, mesh) in [
+        ("plain texture", Mapping::Plain, &coarse),
+        ("mrf bump", Mapping::Bump, &coarse),
+        (
+            "mrf displacement (384x192 grid)",
+            Mapping::Displacement,
+            &fine,
+        ),
+    ] {
+        group.bench_function(name, |b| {
+            b.iter(|| black_box(renderer.render(&material, mesh, &scene, mapping).unwrap()))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, frames);
+criterion_main!(benches);

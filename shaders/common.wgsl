@@ -1,0 +1,251 @@
+// Shared declarations and helpers of the MRF pipelines (bump, displacement, plain). Prepended
+// to each pipeline's file at load time. The CPU reference is src/synthesis.rs
+// (image_from_cache, bump_relight) and src/btf/directions.rs (DirectionSet::interpolate);
+// the lookup tables are built in src/render/lut.rs.
+
+const PI: f32 = 3.14159265358979;
+const HALF_PI: f32 = 1.57079632679490;
+const DIRECTION_GRID: u32 = 128u;
+const SHADING_GRID: u32 = 64u;
+const NO_LAYER: u32 = 0xffffffffu;
+
+struct Globals {
+    view_proj: mat4x4<f32>,
+    // xyz: camera position (w = 1, perspective) or direction towards the camera (w = 0,
+    // orthographic).
+    camera: vec4<f32>,
+    // xyz: light position (w = 1) or direction towards the light (w = 0).
+    light: vec4<f32>,
+    // x: squared light distance from the origin (point light falloff, 1 at the origin),
+    // y: 1 when the model has a range map, z: displacement scale (world units per height
+    // texel), w: the texture layer shown by the plain pipeline.
+    params: vec4<f32>,
+    // x: measured views, y: measured lights.
+    counts: vec4<u32>,
+}
+
+@group(0) @binding(0) var<uniform> globals: Globals;
+// The synthesized subspace images (tileable), one layer per synthesized cluster.
+@group(0) @binding(1) var subspaces: texture_2d_array<f32>;
+// Range map: xyz = unit normal in the tangent frame, w = height in texels (mean 0).
+@group(0) @binding(2) var relief: texture_2d<f32>;
+@group(0) @binding(3) var tex_sampler: sampler;
+// Per direction-grid cell: the Delaunay triangle (3 direction indices).
+@group(0) @binding(4) var<storage, read> view_cells: array<vec4<u32>>;
+@group(0) @binding(5) var<storage, read> light_cells: array<vec4<u32>>;
+// Projected coordinates of the measured directions.
+@group(0) @binding(6) var<storage, read> view_points: array<vec2<f32>>;
+@group(0) @binding(7) var<storage, read> light_points: array<vec2<f32>>;
+// (view * lights + light) -> texture layer of its cluster, NO_LAYER when not synthesized.
+@group(0) @binding(8) var<storage, read> pair_layer: array<u32>;
+// Mean of max(0, n . l) over the texture, on a SHADING_GRID^2 node grid of light directions.
+@group(0) @binding(9) var<storage, read> mean_shade: array<f32>;
+
+struct VertexInput {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) tangent: vec4<f32>,
+    @location(3) uv: vec2<f32>,
+}
+
+struct VertexOutput {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) tangent: vec4<f32>,
+    @location(3) uv: vec2<f32>,
+}
+
+// Azimuthal-equidistant projection of a unit tangent-frame vector, theta clamped to 90 deg.
+fn project_dir(v: vec3<f32>) -> vec2<f32> {
+    let theta = min(acos(clamp(v.z, -1.0, 1.0)), HALF_PI);
+    let r = length(v.xy);
+    if (r < 1e-7) {
+        return vec2<f32>(0.0, 0.0);
+    }
+    return theta * v.xy / r;
+}
+
+struct Closest {
+    point: vec2<f32>,
+    bary: vec3<f32>,
+}
+
+// The point of triangle (a, b, c) closest to p and its barycentric coordinates (Ericson,
+// Real-Time Collision Detection, 5.1.5): the same function as the CPU's.
+fn closest_in_triangle(p: vec2<f32>, a: vec2<f32>, b: vec2<f32>, c: vec2<f32>) -> Closest {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = dot(ab, ap);
+    let d2 = dot(ac, ap);
+    if (d1 <= 0.0 && d2 <= 0.0) {
+        return Closest(a, vec3<f32>(1.0, 0.0, 0.0));
+    }
+    let bp = p - b;
+    let d3 = dot(ab, bp);
+    let d4 = dot(ac, bp);
+    if (d3 >= 0.0 && d4 <= d3) {
+        return Closest(b, vec3<f32>(0.0, 1.0, 0.0));
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
+        let v = d1 / (d1 - d3);
+        return Closest(a + v * ab, vec3<f32>(1.0 - v, v, 0.0));
+    }
+    let cp = p - c;
+    let d5 = dot(ab, cp);
+    let d6 = dot(ac, cp);
+    if (d6 >= 0.0 && d5 <= d6) {
+        return Closest(c, vec3<f32>(0.0, 0.0, 1.0));
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
+        let w = d2 / (d2 - d6);
+        return Closest(a + w * ac, vec3<f32>(1.0 - w, 0.0, w));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return Closest(b + w * (c - b), vec3<f32>(0.0, 1.0 - w, w));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let v = vb * denom;
+    let w = vc * denom;
+    return Closest(a + ab * v + ac * w, vec3<f32>(1.0 - v - w, v, w));
+}
+
+struct Interpolated {
+    index: vec3<u32>,
+    weight: vec3<f32>,
+}
+
+// The 3 measured directions around tangent-frame vector v and their barycentric weights
+// (DirectionLut::lookup on the CPU): the nearest of the triangles of the 2 x 2 grid cells
+// around the query.
+fn interpolate_dir(v: vec3<f32>, is_view: bool) -> Interpolated {
+    let q = project_dir(v);
+    let f = (q + vec2<f32>(HALF_PI)) / PI * f32(DIRECTION_GRID) - vec2<f32>(0.5);
+    let last = i32(DIRECTION_GRID) - 1;
+    let x0 = clamp(i32(floor(f.x)), 0, last);
+    let y0 = clamp(i32(floor(f.y)), 0, last);
+    let x1 = clamp(i32(floor(f.x + 1.0)), 0, last);
+    let y1 = clamp(i32(floor(f.y + 1.0)), 0, last);
+    var best = Interpolated(vec3<u32>(0u), vec3<f32>(1.0, 0.0, 0.0));
+    var best_d2 = 1e30;
+    for (var k = 0; k < 4; k++) {
+        let x = select(x0, x1, (k & 1) == 1);
+        let y = select(y0, y1, (k & 2) == 2);
+        let cell = u32(y) * DIRECTION_GRID + u32(x);
+        var tri: vec3<u32>;
+        var a: vec2<f32>;
+        var b: vec2<f32>;
+        var c: vec2<f32>;
+        if (is_view) {
+            tri = view_cells[cell].xyz;
+            a = view_points[tri.x];
+            b = view_points[tri.y];
+            c = view_points[tri.z];
+        } else {
+            tri = light_cells[cell].xyz;
+            a = light_points[tri.x];
+            b = light_points[tri.y];
+            c = light_points[tri.z];
+        }
+        let r = closest_in_triangle(q, a, b, c);
+        let d = r.point - q;
+        let d2 = dot(d, d);
+        if (d2 < best_d2 - 1e-12) {
+            best_d2 = d2;
+            let w = max(r.bary, vec3<f32>(0.0));
+            best = Interpolated(tri, w / (w.x + w.y + w.z));
+        }
+    }
+    return best;
+}
+
+// Mean of max(0, n . l) over the texture for tangent-frame light l (bilinear in the table).
+fn mean_shading(l: vec3<f32>) -> f32 {
+    let q = project_dir(l);
+    let last = f32(SHADING_GRID - 1u);
+    let f = clamp((q + vec2<f32>(HALF_PI)) / PI * last, vec2<f32>(0.0), vec2<f32>(last));
+    let x0 = min(u32(floor(f.x)), SHADING_GRID - 2u);
+    let y0 = min(u32(floor(f.y)), SHADING_GRID - 2u);
+    let t = f - vec2<f32>(f32(x0), f32(y0));
+    let i = y0 * SHADING_GRID + x0;
+    let top = mix(mean_shade[i], mean_shade[i + 1u], t.x);
+    let bottom = mix(mean_shade[i + SHADING_GRID], mean_shade[i + SHADING_GRID + 1u], t.x);
+    return mix(top, bottom, t.y);
+}
+
+// The tangent frame (x = tangent, y = bitangent = image up, z = normal) at a fragment.
+fn tangent_frame(normal: vec3<f32>, tangent: vec4<f32>) -> mat3x3<f32> {
+    let n = normalize(normal);
+    let t = normalize(tangent.xyz - n * dot(n, tangent.xyz));
+    let b = cross(n, t) * tangent.w;
+    return mat3x3<f32>(t, b, n);
+}
+
+// The standard vertex transform (no displacement).
+fn transform(in: VertexInput, position: vec3<f32>) -> VertexOutput {
+    var out: VertexOutput;
+    out.clip = globals.view_proj * vec4<f32>(position, 1.0);
+    out.world = position;
+    out.normal = in.normal;
+    out.tangent = in.tangent;
+    out.uv = in.uv;
+    return out;
+}
+
+// The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
+// light) pairs blend their clusters' subspace images, then the range map's normal relights
+// the blend for the light, divided by the mean shading so that the subspace images' own
+// average shading is not applied twice (bump_relight). Clusters that were not synthesized
+// (outside the planned set) are skipped and the weights renormalised.
+fn shade_mrf(in: VertexOutput) -> vec4<f32> {
+    let frame = tangent_frame(in.normal, in.tangent);
+    let to_world = transpose(frame);
+    var v_world = globals.camera.xyz;
+    if (globals.camera.w > 0.5) {
+        v_world = globals.camera.xyz - in.world;
+    }
+    v_world = normalize(v_world);
+    var l_world = globals.light.xyz;
+    var falloff = 1.0;
+    if (globals.light.w > 0.5) {
+        l_world = globals.light.xyz - in.world;
+        falloff = globals.params.x / max(dot(l_world, l_world), 1e-8);
+    }
+    let v = to_world * v_world;
+    let l = to_world * normalize(l_world);
+    let ddx = dpdx(in.uv);
+    let ddy = dpdy(in.uv);
+    let relief_here = textureSampleGrad(relief, tex_sampler, in.uv, ddx, ddy);
+    if (l.z <= 0.0) {
+        return vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    }
+    let iv = interpolate_dir(v, true);
+    let il = interpolate_dir(l, false);
+    var sum = vec3<f32>(0.0);
+    var total = 0.0;
+    for (var a = 0; a < 3; a++) {
+        for (var b = 0; b < 3; b++) {
+            let w = iv.weight[a] * il.weight[b];
+            if (w > 0.0) {
+                let layer = pair_layer[iv.index[a] * globals.counts.y + il.index[b]];
+                if (layer != NO_LAYER) {
+                    sum += w * textureSampleGrad(subspaces, tex_sampler, in.uv, layer, ddx, ddy).rgb;
+                    total += w;
+                }
+            }
+        }
+    }
+    var colour = sum / max(total, 1e-12);
+    if (globals.params.y > 0.5) {
+        let mean = mean_shading(l);
+        if (mean >= 1e-3) {
+            colour *= max(dot(relief_here.xyz, l), 0.0) / mean;
+        }
+    }
+    return vec4<f32>(colour * falloff, 1.0);
+}

@@ -1,0 +1,13 @@
+// Plain texturing, the cost baseline: one sample of one subspace image, no view or light
+// dependence, no relighting.
+
+@vertex
+fn vs_main(in: VertexInput) -> VertexOutput {
+    return transform(in, in.position);
+}
+
+@fragment
+fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
+    let layer = u32(globals.params.w);
+    return vec4<f32>(textureSample(subspaces, tex_sampler, in.uv, layer).rgb, 1.0);
+}

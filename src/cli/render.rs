@@ -1,0 +1,155 @@
+//! `btfmrf render`: a model on a mesh, rendered headless by the GPU (or Mesa lavapipe) to PNG.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use btfmrf::btf::{Direction, io};
+use btfmrf::model::format;
+use btfmrf::render::headless::ModelRenderOptions;
+use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
+
+use super::synthesize::{parse_direction, parse_size};
+use super::{Global, emit};
+
+/// Render a model on a mesh to an image, headless (works without a GPU through Mesa's
+/// software Vulkan driver, lavapipe).
+///
+/// Only the subspace images the visible surface needs are synthesized, at the texture
+/// resolution its screen footprint asks for (a power of two, at most --max-texture-size).
+///
+/// Examples:
+///   btfmrf render sponge.btfm --out sphere.png --size 800x800 --mesh sphere --mapping bump
+///   btfmrf render sponge.btfm --out cloth.png --mesh cloth --mapping displacement --light 60,200
+///   btfmrf render sponge.btfm --out bunny.png --mesh bunny.obj --view 20,270 --json
+#[derive(Debug, clap::Args)]
+#[command(verbatim_doc_comment)]
+pub struct Args {
+    /// The model file (.btfm).
+    model: PathBuf,
+    /// Output image (.png, .jpg or .exr).
+    #[arg(long)]
+    out: PathBuf,
+    /// Image size: N (square) or WxH, pixels.
+    #[arg(long, value_parser = parse_size, default_value = "512")]
+    size: (usize, usize),
+    /// sphere, plane, cloth, torus, or an OBJ file (with texture coordinates).
+    #[arg(long, default_value = "sphere")]
+    mesh: MeshKind,
+    /// bump or displacement (plain: one subspace image as a plain texture, for comparison).
+    #[arg(long, default_value = "bump")]
+    mapping: Mapping,
+    /// Camera direction "theta,phi" in degrees, seen from the object (phi 270 = in front).
+    #[arg(long, value_parser = parse_direction, default_value = "30,270")]
+    view: Direction,
+    /// Camera distance from the object's centre.
+    #[arg(long, default_value_t = 3.5)]
+    distance: f32,
+    /// Light direction "theta,phi" in degrees, seen from the object.
+    #[arg(long, value_parser = parse_direction, default_value = "45,300")]
+    light: Direction,
+    /// Point-light distance from the object's centre ("inf": a directional light).
+    #[arg(long, default_value_t = 4.0)]
+    light_distance: f32,
+    /// Fixed texture side (a power of two); default: from the screen footprint.
+    #[arg(long)]
+    texture_size: Option<usize>,
+    /// Largest texture side chosen from the footprint.
+    #[arg(long, default_value_t = 2048)]
+    max_texture_size: usize,
+    /// Texture repetitions per unit length of the built-in meshes.
+    #[arg(long, default_value_t = 1.0)]
+    repeats: f32,
+    /// Mesh grid resolution (default: 64 for bump, 384 for displacement).
+    #[arg(long)]
+    detail: Option<u32>,
+    /// Seed of the synthesis: same seed, same image.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Print one JSON object (timings in seconds, subspaces and texels synthesized).
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
+    let (rows, cols) = args.size;
+    let (width, height) = (u32::try_from(cols)?, u32::try_from(rows)?);
+    btfmrf::render::headless::check_size(width, height)?;
+    if !(args.distance.is_finite() && args.distance > 0.0) {
+        anyhow::bail!("invalid --distance {}: must be positive", args.distance);
+    }
+    if args.light_distance.is_nan() || args.light_distance <= 0.0 {
+        anyhow::bail!(
+            "invalid --light-distance {}: must be positive",
+            args.light_distance
+        );
+    }
+    if !(args.repeats.is_finite() && args.repeats > 0.0 && args.repeats <= 1000.0) {
+        anyhow::bail!(
+            "invalid --repeats {}: must be within (0, 1000]",
+            args.repeats
+        );
+    }
+    let model = format::read(&args.model)?;
+    let detail = args.detail.unwrap_or(match args.mapping {
+        Mapping::Displacement => 384,
+        _ => 64,
+    });
+    let mesh = args.mesh.build(detail, args.repeats)?;
+    let scene = Scene {
+        camera: Camera::orbit(args.view, args.distance),
+        light: Light {
+            direction: args.light,
+            distance: args
+                .light_distance
+                .is_finite()
+                .then_some(args.light_distance),
+        },
+        width,
+        height,
+    };
+    let renderer = Renderer::new()?;
+    let out = renderer.render_model(
+        &model,
+        &mesh,
+        &scene,
+        &ModelRenderOptions {
+            mapping: args.mapping,
+            seed: args.seed,
+            texture_size: args.texture_size,
+            max_texture_size: args.max_texture_size.clamp(32, 8192),
+        },
+    )?;
+    io::write_image(&args.out, &out.image)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    if args.json {
+        emit(serde_json::json!({
+            "out": args.out,
+            "adapter": out.adapter,
+            "mesh": args.mesh.to_string(),
+            "mapping": args.mapping.name(),
+            "width": width,
+            "height": height,
+            "texture_size": out.plan.texture_size,
+            "clusters": out.plan.clusters,
+            "subspaces_synthesized": out.plan.clusters.len(),
+            "subspaces_total": out.subspaces_total,
+            "texels_synthesized": out.texels_synthesized,
+            "synthesis_seconds": out.synthesis_seconds,
+            "render_seconds": out.render_seconds,
+        }))
+    } else {
+        emit(format!(
+            "wrote {} ({}x{}, {} on {}; {} of {} subspace images synthesized at {}^2 in {:.3} s, rendered in {:.3} s)",
+            args.out.display(),
+            width,
+            height,
+            args.mapping,
+            out.adapter,
+            out.plan.clusters.len(),
+            out.subspaces_total,
+            out.plan.texture_size,
+            out.synthesis_seconds,
+            out.render_seconds
+        ))
+    }
+}

@@ -1,0 +1,329 @@
+//! Offscreen rendering to linear RGB images, and the whole "model -> picture" job.
+
+use std::time::Instant;
+
+use ndarray::Array3;
+
+use super::lut::DirectionLut;
+use super::mesh::Mesh;
+use super::pipeline::{DEPTH_FORMAT, GpuMaterial, GpuMesh, MaterialTables, Pipelines};
+use super::plan::{ScenePlan, plan_scene};
+use super::scene::Scene;
+use super::{GpuContext, MAX_RENDER_SIDE, Mapping, RenderError, Result};
+use crate::model::MaterialModel;
+use crate::synthesis::SynthesisOptions;
+
+/// The colour format of offscreen targets: linear float, read back exactly.
+pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+
+/// A device and the pipelines for offscreen targets.
+#[derive(Debug)]
+pub struct Renderer {
+    /// The device.
+    pub ctx: GpuContext,
+    /// The pipelines (for [`TARGET_FORMAT`]).
+    pub pipelines: Pipelines,
+}
+
+/// A rendered picture and what it cost.
+#[derive(Debug, Clone)]
+pub struct RenderOutput {
+    /// Linear RGB, planar (3, height, width).
+    pub image: Array3<f32>,
+    /// The plan: clusters synthesized and texture side.
+    pub plan: ScenePlan,
+    /// Subspace images in the model.
+    pub subspaces_total: usize,
+    /// Texels synthesized (clusters x side^2).
+    pub texels_synthesized: u64,
+    /// Seconds spent synthesizing subspace images and range map.
+    pub synthesis_seconds: f64,
+    /// Seconds spent uploading, rendering and reading back the frame.
+    pub render_seconds: f64,
+    /// The adapter, e.g. "llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)".
+    pub adapter: String,
+}
+
+/// Options of [`Renderer::render_model`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModelRenderOptions {
+    /// The mapping.
+    pub mapping: Mapping,
+    /// Seed of the synthesis.
+    pub seed: u64,
+    /// A fixed texture side (a power of two); `None` chooses it from the screen footprint.
+    pub texture_size: Option<usize>,
+    /// The largest texture side chosen from the footprint.
+    pub max_texture_size: usize,
+}
+
+impl Default for ModelRenderOptions {
+    fn default() -> Self {
+        Self {
+            mapping: Mapping::Bump,
+            seed: 1,
+            texture_size: None,
+            max_texture_size: 2048,
+        }
+    }
+}
+
+/// Records one frame into `encoder`: clears colour (black) and depth, then `draw`s.
+pub fn encode_frame(
+    encoder: &mut wgpu::CommandEncoder,
+    colour: &wgpu::TextureView,
+    depth: &wgpu::TextureView,
+    draw: impl FnOnce(&mut wgpu::RenderPass<'_>),
+) {
+    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some("frame"),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: colour,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                store: wgpu::StoreOp::Store,
+            },
+        })],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: depth,
+            depth_ops: Some(wgpu::Operations {
+                load: wgpu::LoadOp::Clear(1.0),
+                store: wgpu::StoreOp::Discard,
+            }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    });
+    draw(&mut pass);
+}
+
+/// Copies a 2D texture (usage `COPY_SRC`, `bytes_per_pixel` per texel) to the CPU: rows
+/// without padding, top row first. Waits for the GPU.
+///
+/// # Errors
+/// A device error.
+pub fn read_texture(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    bytes_per_pixel: u32,
+) -> Result<Vec<u8>> {
+    let (w, h) = (texture.width(), texture.height());
+    let row_bytes = w * bytes_per_pixel;
+    let padded = row_bytes.div_ceil(256) * 256;
+    let readback = ctx.checked("readback buffer", || {
+        ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: u64::from(padded) * u64::from(h),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    })?;
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    encoder.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &readback,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded),
+                rows_per_image: Some(h),
+            },
+        },
+        wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
+    );
+    ctx.queue.submit([encoder.finish()]);
+    let slice = readback.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    let device_error = |e: String| RenderError::Device(e);
+    ctx.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| device_error(e.to_string()))?;
+    rx.recv()
+        .map_err(|e| device_error(e.to_string()))?
+        .map_err(|e| device_error(e.to_string()))?;
+    let data = slice
+        .get_mapped_range()
+        .map_err(|e| device_error(e.to_string()))?;
+    let mut out = Vec::with_capacity((row_bytes * h) as usize);
+    for y in 0..h as usize {
+        out.extend_from_slice(&data[y * padded as usize..y * padded as usize + row_bytes as usize]);
+    }
+    drop(data);
+    readback.unmap();
+    Ok(out)
+}
+
+/// Checks an image size.
+///
+/// # Errors
+/// A side of zero or beyond [`MAX_RENDER_SIDE`].
+pub fn check_size(width: u32, height: u32) -> Result<()> {
+    if width == 0 || height == 0 || width > MAX_RENDER_SIDE || height > MAX_RENDER_SIDE {
+        return Err(RenderError::parameter(
+            "--size",
+            format!("{width}x{height} is outside 1..={MAX_RENDER_SIDE} pixels a side"),
+        ));
+    }
+    Ok(())
+}
+
+impl Renderer {
+    /// A headless device and its pipelines.
+    ///
+    /// # Errors
+    /// No adapter, or a device or shader error.
+    pub fn new() -> Result<Self> {
+        let ctx = GpuContext::headless()?;
+        let pipelines = Pipelines::new(&ctx, TARGET_FORMAT)?;
+        Ok(Self { ctx, pipelines })
+    }
+
+    /// Renders `mesh` with `material` to a linear RGB image (black background).
+    ///
+    /// # Errors
+    /// An invalid size or a device error.
+    pub fn render(
+        &self,
+        material: &GpuMaterial,
+        mesh: &GpuMesh,
+        scene: &Scene,
+        mapping: Mapping,
+    ) -> Result<Array3<f32>> {
+        check_size(scene.width, scene.height)?;
+        let device = &self.ctx.device;
+        let (w, h) = (scene.width, scene.height);
+        let extent = wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        };
+        let target = |format, usage| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("target"),
+                size: extent,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let colour = self.ctx.checked("render target", || {
+            target(
+                TARGET_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            )
+        })?;
+        let depth = target(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
+        material.set_frame(&self.ctx, scene, mesh, 0);
+        let colour_view = colour.create_view(&Default::default());
+        let depth_view = depth.create_view(&Default::default());
+        let mut encoder = device.create_command_encoder(&Default::default());
+        encode_frame(&mut encoder, &colour_view, &depth_view, |pass| {
+            self.pipelines.draw(pass, mapping, material, mesh)
+        });
+        self.ctx.queue.submit([encoder.finish()]);
+        let data = read_texture(&self.ctx, &colour, 16)?;
+        let row_bytes = w as usize * 16;
+        let mut image = Array3::<f32>::zeros((3, h as usize, w as usize));
+        for y in 0..h as usize {
+            let row = &data[y * row_bytes..(y + 1) * row_bytes];
+            for x in 0..w as usize {
+                for c in 0..3 {
+                    let at = 16 * x + 4 * c;
+                    image[[c, y, x]] =
+                        f32::from_le_bytes([row[at], row[at + 1], row[at + 2], row[at + 3]]);
+                }
+            }
+        }
+        Ok(image)
+    }
+
+    /// The whole job: plans the scene, synthesizes exactly the subspace images it needs
+    /// (tileable, at the planned size), uploads them and renders one frame.
+    ///
+    /// # Errors
+    /// An invalid size, a synthesis error or a device error.
+    pub fn render_model(
+        &self,
+        model: &MaterialModel,
+        mesh: &Mesh,
+        scene: &Scene,
+        options: &ModelRenderOptions,
+    ) -> Result<RenderOutput> {
+        check_size(scene.width, scene.height)?;
+        let start = Instant::now();
+        let luts = (
+            DirectionLut::new(&model.views)?,
+            DirectionLut::new(&model.lights)?,
+        );
+        let min_side = (1usize << model.levels().max(1).saturating_sub(1)).max(32);
+        let mut plan = plan_scene(
+            model,
+            mesh,
+            scene,
+            (&luts.0, &luts.1),
+            (min_side, options.max_texture_size),
+        );
+        if let Some(side) = options.texture_size {
+            if side == 0 || !side.is_power_of_two() || side > MAX_RENDER_SIDE as usize {
+                return Err(RenderError::parameter(
+                    "--texture-size",
+                    format!("{side} is not a power of two within 1..={MAX_RENDER_SIDE}"),
+                ));
+            }
+            plan.texture_size = side.max(min_side);
+        }
+        let size = plan.texture_size;
+        let synthesis = SynthesisOptions {
+            rows: size,
+            cols: size,
+            seed: options.seed,
+            tileable: true,
+        };
+        let cache = model.synthesis_cache_for(&plan.clusters, &synthesis)?;
+        let heights = match options.mapping {
+            Mapping::Displacement => model.range_heights(size, size, true),
+            _ => None,
+        };
+        let tables = MaterialTables::new(model, &cache, Some(luts))?;
+        let synthesis_seconds = start.elapsed().as_secs_f64();
+        let start = Instant::now();
+        let material = GpuMaterial::new(
+            &self.ctx,
+            &self.pipelines,
+            &cache,
+            heights.as_ref(),
+            &tables,
+        )?;
+        let gpu_mesh = GpuMesh::new(&self.ctx, mesh);
+        let image = self.render(&material, &gpu_mesh, scene, options.mapping)?;
+        let render_seconds = start.elapsed().as_secs_f64();
+        Ok(RenderOutput {
+            image,
+            texels_synthesized: (plan.clusters.len() * size * size) as u64,
+            plan,
+            subspaces_total: model.subspaces.len(),
+            synthesis_seconds,
+            render_seconds,
+            adapter: self.ctx.describe(),
+        })
+    }
+}

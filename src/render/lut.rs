@@ -1,0 +1,244 @@
+//! Lookup tables that let the shaders interpolate directions and normalise the bump shading
+//! exactly as the CPU does, and their CPU mirrors (used to plan what a scene needs, and to
+//! test the tables against [`DirectionSet::interpolate`]).
+//!
+//! **Directions.** A square grid of [`DIRECTION_GRID`]² cells over the azimuthal-equidistant
+//! plane `theta * (cos phi, sin phi)`, theta up to 90 degrees, stores per cell the Delaunay
+//! triangle that [`DirectionSet::interpolate`] picks at the cell centre. A query takes the
+//! triangles of the 2 x 2 cells around it and, like the CPU, the closest point of the nearest
+//! one, with its barycentric weights. So the weights are exact wherever one of those four
+//! triangles is the CPU's (everywhere for the Bonn sampling, whose triangles are much larger
+//! than a cell), not quantised to the grid.
+//!
+//! **Mean shading.** [`bump_relight`](crate::synthesis::bump_relight) divides by the mean of
+//! `max(0, n . l)` over the texture; [`MeanShading`] tabulates it on a grid of light
+//! directions (bilinear in between).
+
+use ndarray::Array3;
+use rayon::prelude::*;
+
+use crate::btf::directions::{closest_point_in_triangle, project};
+use crate::btf::{Direction, DirectionSet};
+
+use super::Result;
+
+/// Cells per side of the direction grid.
+pub const DIRECTION_GRID: usize = 128;
+/// Nodes per side of the mean-shading grid.
+pub const SHADING_GRID: usize = 64;
+/// The largest number of normals (a strided subsample) averaged per mean-shading node.
+pub const SHADING_SAMPLES: usize = 128 * 128;
+
+const HALF_PI: f64 = std::f64::consts::FRAC_PI_2;
+
+/// Projected coordinates of a unit vector in the tangent frame, theta clamped to 90 degrees
+/// (the shader's `project_dir`).
+pub fn project_vector(v: [f64; 3]) -> [f64; 2] {
+    let theta = v[2].clamp(-1.0, 1.0).acos().min(HALF_PI);
+    let r = (v[0] * v[0] + v[1] * v[1]).sqrt();
+    if r < 1e-12 {
+        [0.0, 0.0]
+    } else {
+        [theta * v[0] / r, theta * v[1] / r]
+    }
+}
+
+/// The direction grid of one [`DirectionSet`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct DirectionLut {
+    /// Projected coordinates of the sampled directions.
+    pub points: Vec<[f32; 2]>,
+    /// Per cell (row-major, row = y), the triangle's three direction indices and a zero.
+    pub cells: Vec<[u32; 4]>,
+}
+
+impl DirectionLut {
+    /// Tabulates `set` (a few milliseconds for the Bonn sampling).
+    ///
+    /// # Errors
+    /// Never for a valid set (interpolation of finite directions does not fail).
+    pub fn new(set: &DirectionSet) -> Result<Self> {
+        let points = set.iter().map(|d| project(d).map(|x| x as f32)).collect();
+        let n = DIRECTION_GRID;
+        let cells = (0..n * n)
+            .into_par_iter()
+            .map(|i| {
+                let c = cell_centre(i % n, i / n);
+                let r = (c[0] * c[0] + c[1] * c[1]).sqrt();
+                let d = Direction::new(r.min(HALF_PI).to_degrees(), c[1].atan2(c[0]).to_degrees());
+                let w = set.interpolate(&d)?;
+                Ok([w[0].index as u32, w[1].index as u32, w[2].index as u32, 0])
+            })
+            .collect::<Result<Vec<_>, crate::btf::BtfError>>()
+            .map_err(crate::model::ModelError::from)?;
+        Ok(Self { points, cells })
+    }
+
+    /// The CPU mirror of the shader's `interpolate_dir`: three direction indices and weights
+    /// for a unit vector in the tangent frame.
+    pub fn lookup(&self, v: [f64; 3]) -> ([usize; 3], [f64; 3]) {
+        let q = project_vector(v);
+        let n = DIRECTION_GRID as f64;
+        let fx = (q[0] + HALF_PI) / std::f64::consts::PI * n - 0.5;
+        let fy = (q[1] + HALF_PI) / std::f64::consts::PI * n - 0.5;
+        let clamp = |f: f64| (f.floor() as i64).clamp(0, DIRECTION_GRID as i64 - 1) as usize;
+        let (x0, y0) = (clamp(fx), clamp(fy));
+        let (x1, y1) = (clamp(fx + 1.0), clamp(fy + 1.0));
+        let mut best = (f64::INFINITY, [0usize; 3], [1.0, 0.0, 0.0]);
+        for (x, y) in [(x0, y0), (x1, y0), (x0, y1), (x1, y1)] {
+            let cell = self.cells[y * DIRECTION_GRID + x];
+            let tri = [cell[0], cell[1], cell[2]].map(|i| i as usize);
+            let p = tri.map(|i| self.points[i].map(f64::from));
+            let (closest, bary) = closest_point_in_triangle(q, p[0], p[1], p[2]);
+            let d2 = (closest[0] - q[0]).powi(2) + (closest[1] - q[1]).powi(2);
+            if d2 < best.0 - 1e-15 {
+                let bary = bary.map(|w| w.max(0.0));
+                let sum: f64 = bary.iter().sum();
+                best = (d2, tri, bary.map(|w| w / sum));
+            }
+        }
+        (best.1, best.2)
+    }
+}
+
+fn cell_centre(x: usize, y: usize) -> [f64; 2] {
+    let step = std::f64::consts::PI / DIRECTION_GRID as f64;
+    [
+        -HALF_PI + (x as f64 + 0.5) * step,
+        -HALF_PI + (y as f64 + 0.5) * step,
+    ]
+}
+
+/// Mean of `max(0, n . l)` over a texture's normals, tabulated over light directions on a
+/// [`SHADING_GRID`]² node grid spanning the projected plane `[-pi/2, pi/2]^2`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeanShading {
+    /// Node values, row-major (row = y).
+    pub values: Vec<f32>,
+}
+
+impl MeanShading {
+    /// Tabulates the mean shading of `normals` (shape (3, rows, cols)), averaging at most
+    /// [`SHADING_SAMPLES`] normals (a regular strided subsample; all of them for textures up
+    /// to 128 x 128).
+    pub fn new(normals: &Array3<f64>) -> Self {
+        let (_, h, w) = normals.dim();
+        let stride = ((h * w) as f64 / SHADING_SAMPLES as f64)
+            .sqrt()
+            .ceil()
+            .max(1.0) as usize;
+        let samples: Vec<[f64; 3]> = (0..h)
+            .step_by(stride)
+            .flat_map(|y| {
+                (0..w)
+                    .step_by(stride)
+                    .map(move |x| [0, 1, 2].map(|c| normals[[c, y, x]]))
+            })
+            .collect();
+        let n = SHADING_GRID;
+        let values = (0..n * n)
+            .into_par_iter()
+            .map(|i| {
+                let l = node_vector(i % n, i / n);
+                let sum: f64 = samples
+                    .iter()
+                    .map(|s| (s[0] * l[0] + s[1] * l[1] + s[2] * l[2]).max(0.0))
+                    .sum();
+                (sum / samples.len().max(1) as f64) as f32
+            })
+            .collect();
+        Self { values }
+    }
+
+    /// The CPU mirror of the shader's `mean_shading`: bilinear between nodes.
+    pub fn lookup(&self, l: [f64; 3]) -> f64 {
+        let q = project_vector(l);
+        let n = SHADING_GRID;
+        let f = |c: f64| {
+            ((c + HALF_PI) / std::f64::consts::PI * (n - 1) as f64).clamp(0.0, (n - 1) as f64)
+        };
+        let (fx, fy) = (f(q[0]), f(q[1]));
+        let (x0, y0) = (
+            (fx.floor() as usize).min(n - 2),
+            (fy.floor() as usize).min(n - 2),
+        );
+        let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
+        let v = |x: usize, y: usize| f64::from(self.values[y * n + x]);
+        (v(x0, y0) * (1.0 - tx) + v(x0 + 1, y0) * tx) * (1.0 - ty)
+            + (v(x0, y0 + 1) * (1.0 - tx) + v(x0 + 1, y0 + 1) * tx) * ty
+    }
+}
+
+/// The unit vector of mean-shading node (x, y).
+fn node_vector(x: usize, y: usize) -> [f64; 3] {
+    let step = std::f64::consts::PI / (SHADING_GRID - 1) as f64;
+    let q = [-HALF_PI + x as f64 * step, -HALF_PI + y as f64 * step];
+    let r = (q[0] * q[0] + q[1] * q[1]).sqrt();
+    let d = Direction::new(r.min(HALF_PI).to_degrees(), q[1].atan2(q[0]).to_degrees());
+    d.vector()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_direction_table_reproduces_cpu_interpolation() {
+        let set = DirectionSet::bonn();
+        let lut = DirectionLut::new(&set).unwrap();
+        let (mut worst, mut count) = (0.0f64, 0);
+        for t in 0..=45 {
+            for p in 0..72 {
+                let d = Direction::new(t as f64 * 2.0, p as f64 * 5.0 + 1.3);
+                let cpu = set.interpolate(&d).unwrap();
+                let (idx, w) = lut.lookup(d.vector());
+                // Compare as sparse weight vectors over direction indices.
+                let mut diff = vec![0.0f64; set.len()];
+                for c in cpu {
+                    diff[c.index] += c.weight;
+                }
+                for k in 0..3 {
+                    diff[idx[k]] -= w[k];
+                }
+                worst = worst.max(diff.iter().map(|x| x.abs()).fold(0.0, f64::max));
+                count += 1;
+            }
+        }
+        assert!(count > 3000);
+        assert!(worst < 1e-6, "largest weight difference {worst}");
+    }
+
+    #[test]
+    fn mean_shading_matches_the_mean_it_tabulates() {
+        // A bumpy normal field.
+        let (h, w) = (40, 40);
+        let normals = Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+            let (a, b) = ((x as f64 * 0.4).sin() * 0.5, (y as f64 * 0.3).cos() * 0.4);
+            let len = (a * a + b * b + 1.0).sqrt();
+            [a, b, 1.0][c] / len
+        });
+        let table = MeanShading::new(&normals);
+        for d in [
+            Direction::new(0.0, 0.0),
+            Direction::new(37.0, 123.0),
+            Direction::new(75.0, 300.0),
+        ] {
+            let l = d.vector();
+            let mut sum = 0.0;
+            for y in 0..h {
+                for x in 0..w {
+                    sum += (normals[[0, y, x]] * l[0]
+                        + normals[[1, y, x]] * l[1]
+                        + normals[[2, y, x]] * l[2])
+                        .max(0.0);
+                }
+            }
+            let exact = sum / (h * w) as f64;
+            let got = table.lookup(l);
+            assert!(
+                (got - exact).abs() < 2e-3 * exact.max(0.1),
+                "{d:?}: {got} vs {exact}"
+            );
+        }
+    }
+}

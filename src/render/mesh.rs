@@ -1,0 +1,560 @@
+//! Triangle meshes with tangent frames: sphere, plane, a draped cloth, torus, and OBJ files.
+//!
+//! World space has y up. Texture coordinates follow the image convention (u along columns,
+//! v along rows, v = 0 on the top row), and the tangent frame follows the BTF convention of
+//! [`crate::btf::directions`]: x = tangent (direction of increasing u), y = bitangent (image
+//! up, the direction of *decreasing* v), z = normal. The bitangent is
+//! `tangent.w * cross(normal, tangent)`, so mirrored texture mappings work too.
+
+use std::path::{Path, PathBuf};
+
+use super::{RenderError, Result};
+
+/// One vertex as the shaders read it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Vertex {
+    /// Position, world units.
+    pub position: [f32; 3],
+    /// Unit normal.
+    pub normal: [f32; 3],
+    /// Unit tangent (increasing u, orthogonal to the normal); `w` = ±1, the bitangent's sign.
+    pub tangent: [f32; 4],
+    /// Texture coordinates, in repetitions of the (tileable) texture.
+    pub uv: [f32; 2],
+}
+
+impl Vertex {
+    /// The bitangent (image up): `w * cross(normal, tangent)`.
+    pub fn bitangent(&self) -> [f32; 3] {
+        let c = cross(
+            self.normal,
+            [self.tangent[0], self.tangent[1], self.tangent[2]],
+        );
+        c.map(|x| x * self.tangent[3])
+    }
+
+    /// The vertex buffer layout matching the shaders' `VertexInput`.
+    pub fn layout() -> wgpu::VertexBufferLayout<'static> {
+        const ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x4, 3 => Float32x2];
+        wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<Vertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &ATTRIBUTES,
+        }
+    }
+}
+
+/// An indexed triangle mesh.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mesh {
+    /// The vertices.
+    pub vertices: Vec<Vertex>,
+    /// Three indices per triangle, counter-clockwise seen from outside.
+    pub indices: Vec<u32>,
+}
+
+/// Which mesh to render.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MeshKind {
+    /// A unit sphere.
+    Sphere,
+    /// A 2 x 2 square in the xz plane, normal +y.
+    Plane,
+    /// A sheet draped in sine folds.
+    Cloth,
+    /// A torus (radii 1 and 0.4).
+    Torus,
+    /// A Wavefront OBJ file (with texture coordinates), centred and scaled to radius 1.
+    Obj(PathBuf),
+}
+
+impl std::str::FromStr for MeshKind {
+    type Err = std::convert::Infallible;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        Ok(match s.to_ascii_lowercase().as_str() {
+            "sphere" => MeshKind::Sphere,
+            "plane" => MeshKind::Plane,
+            "cloth" => MeshKind::Cloth,
+            "torus" => MeshKind::Torus,
+            _ => MeshKind::Obj(PathBuf::from(s)),
+        })
+    }
+}
+
+impl std::fmt::Display for MeshKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MeshKind::Sphere => f.write_str("sphere"),
+            MeshKind::Plane => f.write_str("plane"),
+            MeshKind::Cloth => f.write_str("cloth"),
+            MeshKind::Torus => f.write_str("torus"),
+            MeshKind::Obj(p) => write!(f, "{}", p.display()),
+        }
+    }
+}
+
+impl MeshKind {
+    /// Builds the mesh. `detail` is the number of grid cells along the longest parameter
+    /// direction (large for displacement mapping); `repeats` how many texture tiles cover the
+    /// unit of length of the built-in shapes (OBJ files keep their own coordinates).
+    ///
+    /// # Errors
+    /// An OBJ file that is missing, corrupt, empty or without texture coordinates.
+    pub fn build(&self, detail: u32, repeats: f32) -> Result<Mesh> {
+        let n = detail.clamp(4, 2048);
+        Ok(match self {
+            MeshKind::Sphere => Mesh::sphere(n, (n / 2).max(2), repeats),
+            MeshKind::Plane => Mesh::plane(n, repeats),
+            MeshKind::Cloth => Mesh::cloth(n, repeats),
+            MeshKind::Torus => Mesh::torus(n, (n * 2 / 5).max(3), repeats),
+            MeshKind::Obj(path) => Mesh::from_obj(path)?,
+        })
+    }
+}
+
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn normalize(a: [f32; 3]) -> Option<[f32; 3]> {
+    let len = dot(a, a).sqrt();
+    (len.is_finite() && len > 1e-12).then(|| a.map(|x| x / len))
+}
+
+impl Mesh {
+    /// A grid of `(cols + 1) x (rows + 1)` vertices from a parametric surface `f(s, t)`
+    /// (s, t in [0, 1]) returning position and normal; uv = `(s * su, t * sv)`.
+    fn grid(
+        cols: u32,
+        rows: u32,
+        (su, sv): (f32, f32),
+        f: impl Fn(f32, f32) -> ([f32; 3], [f32; 3]),
+    ) -> Self {
+        let mut vertices = Vec::with_capacity(((cols + 1) * (rows + 1)) as usize);
+        for r in 0..=rows {
+            for c in 0..=cols {
+                let (s, t) = (c as f32 / cols as f32, r as f32 / rows as f32);
+                let (position, normal) = f(s, t);
+                vertices.push(Vertex {
+                    position,
+                    normal,
+                    tangent: [0.0; 4],
+                    uv: [s * su, t * sv],
+                });
+            }
+        }
+        let mut indices = Vec::with_capacity((cols * rows * 6) as usize);
+        let at = |c: u32, r: u32| r * (cols + 1) + c;
+        for r in 0..rows {
+            for c in 0..cols {
+                let (a, b, d, e) = (at(c, r), at(c + 1, r), at(c, r + 1), at(c + 1, r + 1));
+                indices.extend_from_slice(&[a, d, b, b, d, e]);
+            }
+        }
+        let mut mesh = Self { vertices, indices };
+        mesh.orient_outwards();
+        mesh.compute_tangents();
+        mesh
+    }
+
+    /// Flips every triangle whose winding disagrees with its vertex normals, so front faces
+    /// are counter-clockwise seen from the side the normals point to.
+    fn orient_outwards(&mut self) {
+        for tri in self.indices.chunks_exact_mut(3) {
+            let [a, b, c] = [tri[0], tri[1], tri[2]].map(|i| self.vertices[i as usize]);
+            let face = cross(sub(b.position, a.position), sub(c.position, a.position));
+            let n = [0, 1, 2].map(|k| a.normal[k] + b.normal[k] + c.normal[k]);
+            if dot(face, n) < 0.0 {
+                tri.swap(1, 2);
+            }
+        }
+    }
+
+    /// A unit sphere: `segments` around, `rings` from pole to pole; the texture repeats
+    /// `2 * repeats` times around the equator and `repeats` times pole to pole.
+    pub fn sphere(segments: u32, rings: u32, repeats: f32) -> Self {
+        use std::f32::consts::PI;
+        Self::grid(segments, rings, (2.0 * repeats, repeats), |s, t| {
+            let (st, ct) = (PI * t).sin_cos();
+            let (sp, cp) = (2.0 * PI * s).sin_cos();
+            let p = [st * cp, ct, -st * sp];
+            (p, p)
+        })
+    }
+
+    /// A 2 x 2 square in the xz plane facing +y, `cells` x `cells` quads; u along +x, v along
+    /// +z, the texture repeating `repeats` times across.
+    pub fn plane(cells: u32, repeats: f32) -> Self {
+        Self::grid(cells, cells, (repeats, repeats), |s, t| {
+            ([2.0 * s - 1.0, 0.0, 2.0 * t - 1.0], [0.0, 1.0, 0.0])
+        })
+    }
+
+    /// A 2 x 2 sheet draped in sine folds (heights up to about 0.3).
+    pub fn cloth(cells: u32, repeats: f32) -> Self {
+        let height = |x: f32, z: f32| {
+            0.18 * (3.0 * x + 0.4).sin() * (1.3 * z).cos() + 0.08 * (5.0 * z + 2.0 * x).sin()
+                - 0.12 * x * x
+        };
+        Self::grid(cells, cells, (repeats, repeats), |s, t| {
+            let (x, z) = (2.0 * s - 1.0, 2.0 * t - 1.0);
+            let e = 1e-3;
+            let dx = (height(x + e, z) - height(x - e, z)) / (2.0 * e);
+            let dz = (height(x, z + e) - height(x, z - e)) / (2.0 * e);
+            let n = normalize([-dx, 1.0, -dz]).unwrap_or([0.0, 1.0, 0.0]);
+            ([x, height(x, z), z], n)
+        })
+    }
+
+    /// A torus around the y axis, radii 1 (ring) and 0.4 (tube); `segments` around the ring,
+    /// `sides` around the tube.
+    pub fn torus(segments: u32, sides: u32, repeats: f32) -> Self {
+        use std::f32::consts::PI;
+        let (big, small) = (1.0f32, 0.4f32);
+        let tau = 2.0 * PI;
+        Self::grid(
+            segments,
+            sides,
+            (tau * big * repeats / 2.0, tau * small * repeats / 2.0),
+            |s, t| {
+                let (sa, ca) = (tau * s).sin_cos();
+                let (sb, cb) = (tau * t).sin_cos();
+                let n = [cb * ca, sb, -cb * sa];
+                let p = [
+                    (big + small * cb) * ca,
+                    small * sb,
+                    -(big + small * cb) * sa,
+                ];
+                (p, n)
+            },
+        )
+    }
+
+    /// Reads a Wavefront OBJ file (all its models), centred on the origin and scaled to fit
+    /// a unit sphere. Normals are computed when missing; tangents always.
+    ///
+    /// # Errors
+    /// A missing or corrupt file, no triangles, no texture coordinates, or non-finite values.
+    pub fn from_obj(path: &Path) -> Result<Self> {
+        let err = |reason: String| RenderError::Mesh {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let (models, _) = tobj::load_obj(
+            path,
+            &tobj::LoadOptions {
+                single_index: true,
+                triangulate: true,
+                ignore_points: true,
+                ignore_lines: true,
+            },
+        )
+        .map_err(|e| err(format!("not a readable OBJ file ({e})")))?;
+        let mut mesh = Mesh {
+            vertices: Vec::new(),
+            indices: Vec::new(),
+        };
+        let mut missing_normals = false;
+        for m in &models {
+            let m = &m.mesh;
+            let count = m.positions.len() / 3;
+            if m.texcoords.len() < 2 * count {
+                return Err(err(
+                    "no texture coordinates (they are needed to map the material)".into(),
+                ));
+            }
+            missing_normals |= m.normals.len() < 3 * count;
+            let base = mesh.vertices.len() as u32;
+            for i in 0..count {
+                let normal = if m.normals.len() >= 3 * count {
+                    [m.normals[3 * i], m.normals[3 * i + 1], m.normals[3 * i + 2]]
+                } else {
+                    [0.0; 3]
+                };
+                mesh.vertices.push(Vertex {
+                    position: [
+                        m.positions[3 * i],
+                        m.positions[3 * i + 1],
+                        m.positions[3 * i + 2],
+                    ],
+                    normal,
+                    tangent: [0.0; 4],
+                    // OBJ's v grows upwards; ours grows down the image.
+                    uv: [m.texcoords[2 * i], 1.0 - m.texcoords[2 * i + 1]],
+                });
+            }
+            for &i in &m.indices {
+                if i as usize >= count {
+                    return Err(err(format!("face index {} beyond {count} vertices", i + 1)));
+                }
+                mesh.indices.push(base + i);
+            }
+        }
+        if mesh.indices.len() < 3 {
+            return Err(err("no triangles".into()));
+        }
+        let finite = mesh.vertices.iter().all(|v| {
+            v.position
+                .iter()
+                .chain(&v.normal)
+                .chain(&v.uv)
+                .all(|x| x.is_finite())
+        });
+        if !finite {
+            return Err(err("non-finite coordinates".into()));
+        }
+        if missing_normals {
+            mesh.compute_normals();
+        }
+        for v in &mut mesh.vertices {
+            v.normal = normalize(v.normal).unwrap_or([0.0, 1.0, 0.0]);
+        }
+        mesh.fit_unit_sphere();
+        mesh.compute_tangents();
+        Ok(mesh)
+    }
+
+    /// Centres the mesh on its bounding-box centre and scales it to radius 1.
+    fn fit_unit_sphere(&mut self) {
+        let mut lo = [f32::INFINITY; 3];
+        let mut hi = [f32::NEG_INFINITY; 3];
+        for v in &self.vertices {
+            for k in 0..3 {
+                lo[k] = lo[k].min(v.position[k]);
+                hi[k] = hi[k].max(v.position[k]);
+            }
+        }
+        let centre = [0, 1, 2].map(|k| 0.5 * (lo[k] + hi[k]));
+        let radius = self
+            .vertices
+            .iter()
+            .map(|v| dot(sub(v.position, centre), sub(v.position, centre)).sqrt())
+            .fold(0.0f32, f32::max);
+        let scale = if radius > 0.0 { 1.0 / radius } else { 1.0 };
+        for v in &mut self.vertices {
+            v.position = [0, 1, 2].map(|k| (v.position[k] - centre[k]) * scale);
+        }
+    }
+
+    /// Area-weighted vertex normals from the faces.
+    pub fn compute_normals(&mut self) {
+        let mut acc = vec![[0.0f32; 3]; self.vertices.len()];
+        for tri in self.indices.chunks_exact(3) {
+            let [a, b, c] = [tri[0], tri[1], tri[2]].map(|i| self.vertices[i as usize].position);
+            let face = cross(sub(b, a), sub(c, a));
+            for &i in tri {
+                for k in 0..3 {
+                    acc[i as usize][k] += face[k];
+                }
+            }
+        }
+        for (v, n) in self.vertices.iter_mut().zip(acc) {
+            v.normal = normalize(n).unwrap_or([0.0, 1.0, 0.0]);
+        }
+    }
+
+    /// Tangent frames from the texture-coordinate derivatives of the faces (accumulated per
+    /// vertex, made orthogonal to the normal; the bitangent sign from `-dP/dv`). Vertices
+    /// whose faces have degenerate texture coordinates get an arbitrary orthonormal frame.
+    pub fn compute_tangents(&mut self) {
+        let mut du = vec![[0.0f32; 3]; self.vertices.len()];
+        let mut dv = vec![[0.0f32; 3]; self.vertices.len()];
+        for tri in self.indices.chunks_exact(3) {
+            let [a, b, c] = [tri[0], tri[1], tri[2]].map(|i| self.vertices[i as usize]);
+            let (e1, e2) = (sub(b.position, a.position), sub(c.position, a.position));
+            let (s1, t1) = (b.uv[0] - a.uv[0], b.uv[1] - a.uv[1]);
+            let (s2, t2) = (c.uv[0] - a.uv[0], c.uv[1] - a.uv[1]);
+            let det = s1 * t2 - s2 * t1;
+            if det.abs() < 1e-20 {
+                continue;
+            }
+            // dP/du and dP/dv of the face, weighted by its uv area (det) so that large faces
+            // count more: (e1 t2 - e2 t1) sign(det), (e2 s1 - e1 s2) sign(det).
+            let sign = det.signum();
+            let pu = [0, 1, 2].map(|k| (e1[k] * t2 - e2[k] * t1) * sign);
+            let pv = [0, 1, 2].map(|k| (e2[k] * s1 - e1[k] * s2) * sign);
+            for &i in tri {
+                for k in 0..3 {
+                    du[i as usize][k] += pu[k];
+                    dv[i as usize][k] += pv[k];
+                }
+            }
+        }
+        for ((v, pu), pv) in self.vertices.iter_mut().zip(du).zip(dv) {
+            let n = v.normal;
+            let t = normalize(sub(pu, n.map(|x| x * dot(n, pu))))
+                .or_else(|| {
+                    // No u derivative: take one perpendicular to the v derivative, else any.
+                    normalize(cross(pv, n))
+                })
+                .unwrap_or_else(|| {
+                    let helper = if n[0].abs() < 0.9 {
+                        [1.0, 0.0, 0.0]
+                    } else {
+                        [0.0, 1.0, 0.0]
+                    };
+                    normalize(cross(helper, n)).unwrap_or([1.0, 0.0, 0.0])
+                });
+            let w = if dot(cross(n, t), pv) > 0.0 {
+                -1.0
+            } else {
+                1.0
+            };
+            v.tangent = [t[0], t[1], t[2], w];
+        }
+    }
+
+    /// World units per texture repetition: `sqrt(world area / uv area)` over all faces.
+    pub fn world_per_uv(&self) -> f32 {
+        let (mut world, mut uv) = (0.0f64, 0.0f64);
+        for tri in self.indices.chunks_exact(3) {
+            let [a, b, c] = [tri[0], tri[1], tri[2]].map(|i| self.vertices[i as usize]);
+            let f = cross(sub(b.position, a.position), sub(c.position, a.position));
+            world += 0.5 * f64::from(dot(f, f).sqrt());
+            let (s1, t1) = (b.uv[0] - a.uv[0], b.uv[1] - a.uv[1]);
+            let (s2, t2) = (c.uv[0] - a.uv[0], c.uv[1] - a.uv[1]);
+            uv += 0.5 * f64::from((s1 * t2 - s2 * t1).abs());
+        }
+        if uv > 0.0 {
+            (world / uv).sqrt() as f32
+        } else {
+            1.0
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every frame orthonormal, right-handed with the bitangent sign, and agreeing with the
+    /// texture derivatives of the faces around it.
+    fn check_frames(mesh: &Mesh, name: &str) {
+        for (i, v) in mesh.vertices.iter().enumerate() {
+            let t = [v.tangent[0], v.tangent[1], v.tangent[2]];
+            let b = v.bitangent();
+            assert!((dot(v.normal, v.normal) - 1.0).abs() < 1e-4, "{name} {i}");
+            assert!((dot(t, t) - 1.0).abs() < 1e-4, "{name} {i}");
+            assert!((dot(b, b) - 1.0).abs() < 1e-4, "{name} {i}");
+            assert!(dot(t, v.normal).abs() < 1e-4, "{name} {i}");
+            assert!(dot(b, v.normal).abs() < 1e-4, "{name} {i}");
+            assert!(dot(t, b).abs() < 1e-4, "{name} {i}");
+            assert!(v.tangent[3].abs() == 1.0);
+        }
+        // Per face: the tangent follows dP/du and the bitangent -dP/dv (non-degenerate faces).
+        let mut checked = 0;
+        for tri in mesh.indices.chunks_exact(3) {
+            let [a, b, c] = [tri[0], tri[1], tri[2]].map(|i| mesh.vertices[i as usize]);
+            let (e1, e2) = (sub(b.position, a.position), sub(c.position, a.position));
+            let (s1, t1) = (b.uv[0] - a.uv[0], b.uv[1] - a.uv[1]);
+            let (s2, t2) = (c.uv[0] - a.uv[0], c.uv[1] - a.uv[1]);
+            let det = s1 * t2 - s2 * t1;
+            let shortest = [e1, e2, sub(c.position, b.position)]
+                .map(|e| dot(e, e).sqrt())
+                .into_iter()
+                .fold(f32::INFINITY, f32::min);
+            if det.abs() < 1e-9 || shortest < 1e-5 {
+                continue;
+            }
+            // Faces with a degenerate edge (at the sphere's poles) have no derivatives.
+            let (Some(pu), Some(pv)) = (
+                normalize([0, 1, 2].map(|k| (e1[k] * t2 - e2[k] * t1) / det)),
+                normalize([0, 1, 2].map(|k| (e2[k] * s1 - e1[k] * s2) / det)),
+            ) else {
+                continue;
+            };
+            for v in [a, b, c] {
+                let t = [v.tangent[0], v.tangent[1], v.tangent[2]];
+                assert!(
+                    dot(t, pu) > 0.5,
+                    "{name}: tangent {t:?} against dP/du {pu:?}"
+                );
+                assert!(
+                    dot(v.bitangent(), pv) < -0.5,
+                    "{name}: bitangent along dP/dv"
+                );
+            }
+            // Front faces counter-clockwise seen from the normal's side.
+            let face = cross(e1, e2);
+            assert!(dot(face, a.normal) > 0.0, "{name}: winding");
+            checked += 1;
+        }
+        assert!(
+            checked > mesh.indices.len() / 3 / 2,
+            "{name}: {checked} faces"
+        );
+    }
+
+    #[test]
+    fn built_in_meshes_have_orthonormal_frames_consistent_with_uv() {
+        for kind in [
+            MeshKind::Sphere,
+            MeshKind::Plane,
+            MeshKind::Cloth,
+            MeshKind::Torus,
+        ] {
+            let mesh = kind.build(24, 2.0).unwrap();
+            check_frames(&mesh, &kind.to_string());
+        }
+    }
+
+    #[test]
+    fn plane_frame_is_the_btf_frame() {
+        let mesh = Mesh::plane(2, 1.0);
+        let v = mesh.vertices[0];
+        assert_eq!(v.normal, [0.0, 1.0, 0.0]);
+        assert!((v.tangent[0] - 1.0).abs() < 1e-6);
+        // Image up is -z: the row index grows along +z.
+        let b = v.bitangent();
+        assert!((b[2] + 1.0).abs() < 1e-6, "{b:?}");
+        assert!((mesh.world_per_uv() - 2.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn obj_files_load_with_computed_tangents_and_bad_ones_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let good = dir.path().join("quad.obj");
+        std::fs::write(
+            &good,
+            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n",
+        )
+        .unwrap();
+        let mesh = Mesh::from_obj(&good).unwrap();
+        assert_eq!(mesh.indices.len(), 6);
+        check_frames(&mesh, "quad.obj");
+        // Normals computed (the quad faces +z), tangent +x, image up +y (OBJ v grows up).
+        let v = mesh.vertices[0];
+        assert!((v.normal[2] - 1.0).abs() < 1e-5);
+        assert!((v.bitangent()[1] - 1.0).abs() < 1e-5);
+
+        let no_uv = dir.path().join("no_uv.obj");
+        std::fs::write(&no_uv, "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n").unwrap();
+        let e = Mesh::from_obj(&no_uv).unwrap_err().to_string();
+        assert!(
+            e.contains("no_uv.obj") && e.contains("texture coordinates"),
+            "{e}"
+        );
+
+        let corrupt = dir.path().join("corrupt.obj");
+        std::fs::write(&corrupt, "v 0 0 zero\nf 1 2 9\n").unwrap();
+        let e = Mesh::from_obj(&corrupt).unwrap_err().to_string();
+        assert!(e.contains("corrupt.obj"), "{e}");
+
+        let missing = dir.path().join("missing.obj");
+        let e = Mesh::from_obj(&missing).unwrap_err().to_string();
+        assert!(e.contains("missing.obj"), "{e}");
+    }
+}

@@ -1,0 +1,348 @@
+//! The renderer: shaders validated by naga, GPU against the CPU reference on a flat plane,
+//! golden images, determinism, and the `render` command's reports and errors.
+//!
+//! Tests that need a GPU adapter skip with a message when none exists; `scripts/setup`
+//! installs Mesa's software Vulkan driver (lavapipe), so on this project's machines and in CI
+//! they run.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use btfmrf::btf::{Direction, io};
+use btfmrf::model::{MaterialModel, format};
+use btfmrf::render::headless::ModelRenderOptions;
+use btfmrf::render::pipeline::shader_source;
+use btfmrf::render::scene::Projection;
+use btfmrf::render::{Camera, Light, Mapping, Mesh, MeshKind, RenderError, Renderer, Scene};
+use btfmrf::synthesis::SynthesisOptions;
+use ndarray::Array3;
+
+/// A small 2D CAR model of the sponge (64 x 64, 8 clusters, with a range map), kept in the
+/// repository so that the golden images depend on synthesis and rendering only.
+fn golden_model_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sponge64.btfm")
+}
+
+fn golden_model() -> MaterialModel {
+    format::read(&golden_model_path()).expect("tests/golden/sponge64.btfm reads")
+}
+
+/// The renderer, or `None` (with a message) when this machine has no GPU adapter at all.
+fn renderer() -> Option<Renderer> {
+    match Renderer::new() {
+        Ok(r) => Some(r),
+        Err(RenderError::NoAdapter(e)) => {
+            eprintln!("skipping: no GPU adapter ({e}); run scripts/setup to install lavapipe");
+            None
+        }
+        Err(e) => panic!("renderer: {e}"),
+    }
+}
+
+fn diff_dir() -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("render-diffs");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Writes `a`, `b` and their amplified absolute difference next to each other for a failure
+/// report; returns the diff path.
+fn write_diff(name: &str, a: &Array3<f32>, b: &Array3<f32>) -> PathBuf {
+    let dir = diff_dir();
+    let diff = (a - b).mapv(|x| (x.abs() * 10.0).min(1.0));
+    io::write_image(&dir.join(format!("{name}-gpu.png")), a).unwrap();
+    io::write_image(&dir.join(format!("{name}-cpu.png")), b).unwrap();
+    let path = dir.join(format!("{name}-diff.png"));
+    io::write_image(&path, &diff).unwrap();
+    path
+}
+
+#[test]
+fn every_shader_validates_with_naga() {
+    for mapping in Mapping::ALL {
+        let source = shader_source(mapping);
+        let module = naga::front::wgsl::parse_str(&source)
+            .unwrap_or_else(|e| panic!("{mapping}: {}", e.emit_to_string(&source)));
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::default(),
+        )
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("{mapping}: {e:?}"));
+        for entry in ["vs_main", "fs_main"] {
+            assert!(
+                module.entry_points.iter().any(|e| e.name == entry),
+                "{mapping}: no {entry}"
+            );
+        }
+    }
+}
+
+/// A camera straight down on the plane, orthographic, the plane filling the frame exactly:
+/// pixel (row, col) shows texel (row, col) of a texture of the image's size.
+fn flat_scene(side: u32, light: Direction) -> Scene {
+    Scene {
+        camera: Camera {
+            direction: Direction::new(0.0, 0.0),
+            distance: 3.0,
+            projection: Projection::Orthographic { half_height: 1.0 },
+        },
+        light: Light {
+            direction: light,
+            distance: None,
+        },
+        width: side,
+        height: side,
+    }
+}
+
+#[test]
+fn gpu_equals_the_cpu_reference_on_a_flat_plane() {
+    let Some(renderer) = renderer() else { return };
+    let model = golden_model();
+    let side = 128;
+    let mesh = Mesh::plane(4, 1.0);
+    let options = ModelRenderOptions {
+        mapping: Mapping::Bump,
+        seed: 5,
+        texture_size: Some(side),
+        ..Default::default()
+    };
+    // Measured and unmeasured lights (the latter interpolated from 3 nearest).
+    for (i, light) in [
+        Direction::new(45.0, 60.0),
+        Direction::new(37.0, 100.0),
+        Direction::new(68.0, 250.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let scene = flat_scene(side as u32, light);
+        let gpu = renderer
+            .render_model(&model, &mesh, &scene, &options)
+            .unwrap();
+        let cache = model
+            .synthesis_cache(&SynthesisOptions {
+                rows: side,
+                cols: side,
+                seed: 5,
+                tileable: true,
+            })
+            .unwrap();
+        let cpu = model
+            .image_from_cache(&cache, &Direction::new(0.0, 0.0), &light)
+            .unwrap();
+        // Exactly the clusters the CPU used were synthesized.
+        let cpu_clusters: Vec<usize> = model
+            .subspace_weights(&Direction::new(0.0, 0.0), &light)
+            .unwrap()
+            .into_keys()
+            .collect();
+        assert_eq!(gpu.plan.clusters, cpu_clusters);
+        assert_eq!(gpu.plan.clusters.len(), cache.synthesized());
+        let err = (&gpu.image - &cpu).mapv(f32::abs);
+        let scale = cpu.iter().fold(0.0f32, |m, &x| m.max(x.abs())).max(1e-3);
+        let max = err.iter().fold(0.0f32, |m, &x| m.max(x));
+        let mean = err.mean().unwrap();
+        eprintln!(
+            "light {light:?}: max |gpu - cpu| = {max:.5} ({:.3}% of the peak {scale:.3}), mean {mean:.6}",
+            100.0 * max / scale
+        );
+        if max > 0.01 * scale || mean > 0.001 * scale {
+            let path = write_diff(&format!("plane-{i}"), &gpu.image, &cpu);
+            panic!(
+                "GPU and CPU differ for light {light:?}: max {max}, mean {mean} (peak {scale}); diff image {}",
+                path.display()
+            );
+        }
+    }
+}
+
+fn golden_scene(light: Direction) -> Scene {
+    Scene {
+        camera: Camera::orbit(Direction::new(30.0, 270.0), 3.2),
+        light: Light {
+            direction: light,
+            distance: Some(4.0),
+        },
+        width: 128,
+        height: 128,
+    }
+}
+
+/// Compares with `tests/golden/NAME.png` (8-bit sRGB): mean absolute difference at most 1.0
+/// and at most 1% of the channel values more than 24 levels apart (software rasterisers
+/// differ slightly at triangle edges). `BTFMRF_BLESS=1` rewrites the golden image.
+fn check_golden(name: &str, image: &Array3<f32>) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("tests/golden/{name}.png"));
+    if std::env::var_os("BTFMRF_BLESS").is_some() {
+        io::write_image(&path, image).unwrap();
+        eprintln!("blessed {}", path.display());
+        return;
+    }
+    let golden = io::read_image(&path)
+        .unwrap_or_else(|e| panic!("{e} (BTFMRF_BLESS=1 writes the golden images)"));
+    assert_eq!(golden.dim(), image.dim(), "{name}");
+    let to8 = |x: f32| (btfmrf::color::linear_to_srgb(x.clamp(0.0, 1.0)) * 255.0).round();
+    let (mut sum, mut far) = (0.0f64, 0usize);
+    for (&a, &b) in image.iter().zip(golden.iter()) {
+        let d = (to8(a) - to8(b)).abs();
+        sum += f64::from(d);
+        far += usize::from(d > 24.0);
+    }
+    let mean = sum / image.len() as f64;
+    eprintln!("{name}: mean |diff| {mean:.3} levels, {far} values beyond 24 levels");
+    if mean > 1.0 || far * 100 > image.len() {
+        let path = write_diff(name, image, &golden);
+        panic!(
+            "{name} differs from its golden image: mean {mean:.3} levels, {far} far values; diff {}",
+            path.display()
+        );
+    }
+}
+
+#[test]
+fn golden_images_of_bump_and_displacement_mapping() {
+    let Some(renderer) = renderer() else { return };
+    let model = golden_model();
+    for (mapping, kind, detail) in [
+        (Mapping::Bump, MeshKind::Sphere, 48),
+        (Mapping::Displacement, MeshKind::Sphere, 192),
+        (Mapping::Bump, MeshKind::Cloth, 48),
+    ] {
+        let mesh = kind.build(detail, 1.0).unwrap();
+        let out = renderer
+            .render_model(
+                &model,
+                &mesh,
+                &golden_scene(Direction::new(50.0, 300.0)),
+                &ModelRenderOptions {
+                    mapping,
+                    seed: 3,
+                    texture_size: Some(128),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+        // Not trivial: the object covers a good part of the frame and is textured.
+        let lit = out.image.iter().filter(|&&x| x > 0.01).count();
+        assert!(
+            lit > out.image.len() / 5,
+            "{mapping} {kind}: {lit} lit values"
+        );
+        check_golden(&format!("{kind}-{mapping}"), &out.image);
+    }
+}
+
+#[test]
+fn renders_are_deterministic_and_the_light_matters() {
+    let Some(renderer) = renderer() else { return };
+    let model = golden_model();
+    let mesh = Mesh::sphere(32, 16, 1.0);
+    let options = ModelRenderOptions {
+        texture_size: Some(64),
+        ..Default::default()
+    };
+    let a = renderer
+        .render_model(
+            &model,
+            &mesh,
+            &golden_scene(Direction::new(40.0, 0.0)),
+            &options,
+        )
+        .unwrap();
+    let b = renderer
+        .render_model(
+            &model,
+            &mesh,
+            &golden_scene(Direction::new(40.0, 0.0)),
+            &options,
+        )
+        .unwrap();
+    assert_eq!(a.image, b.image);
+    let c = renderer
+        .render_model(
+            &model,
+            &mesh,
+            &golden_scene(Direction::new(40.0, 180.0)),
+            &options,
+        )
+        .unwrap();
+    let change = (&a.image - &c.image).mapv(f32::abs).mean().unwrap();
+    assert!(
+        change > 0.01,
+        "moving the light changed the image by {change} only"
+    );
+}
+
+#[test]
+fn the_render_command_reports_what_it_synthesized() {
+    if renderer().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sphere.png");
+    let model = golden_model_path();
+    let stdout = common::ok(&[
+        "render",
+        model.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--size",
+        "96x64",
+        "--mesh",
+        "plane",
+        "--view",
+        "0,0",
+        "--light",
+        "45,0",
+        "--light-distance",
+        "inf",
+        "--json",
+    ]);
+    let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let used = report["subspaces_synthesized"].as_u64().unwrap();
+    let total = report["subspaces_total"].as_u64().unwrap();
+    assert_eq!(total, 8);
+    assert!((1..total).contains(&used), "{report}");
+    let side = report["texture_size"].as_u64().unwrap();
+    assert_eq!(
+        report["texels_synthesized"].as_u64().unwrap(),
+        used * side * side
+    );
+    assert!(report["render_seconds"].as_f64().unwrap() > 0.0);
+    assert!(report["synthesis_seconds"].as_f64().unwrap() > 0.0);
+    let image = io::read_image(&out).unwrap();
+    assert_eq!(image.dim(), (3, 64, 96));
+}
+
+#[test]
+fn bad_render_input_gives_one_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.png");
+    let out = out.to_str().unwrap();
+    let model = golden_model_path();
+    let model = model.to_str().unwrap();
+    let missing = dir.path().join("missing.btfm");
+    let e = common::fails(&["render", missing.to_str().unwrap(), "--out", out]);
+    assert!(e.contains("missing.btfm"), "{e}");
+    for size in ["0x10", "9000x10"] {
+        let e = common::fails(&["render", model, "--out", out, "--size", size]);
+        assert!(e.contains("--size"), "{e}");
+    }
+    let obj = dir.path().join("broken.obj");
+    std::fs::write(&obj, "v 1 2\nf 1 2 3 4 5\n").unwrap();
+    let e = common::fails(&[
+        "render",
+        model,
+        "--out",
+        out,
+        "--mesh",
+        obj.to_str().unwrap(),
+    ]);
+    assert!(e.contains("broken.obj"), "{e}");
+    let e = common::fails(&["render", model, "--out", out, "--mapping", "wobble"]);
+    assert!(e.contains("wobble"), "{e}");
+    assert!(!Path::new(out).exists());
+}
