@@ -8,6 +8,7 @@ use btfmrf::btf::io::write_file_atomic;
 use btfmrf::features::FeatureOptions;
 use btfmrf::features::recognition::{
     Dataset, Method, Outcome, evaluate, rti_dataset, synthetic_dataset, texture_dataset,
+    with_relit_tests,
 };
 use btfmrf::progress::Progress;
 
@@ -17,7 +18,8 @@ use super::{Bar, Global, emit};
 /// images by the invariant MRF features, against colour histograms and LBP histograms.
 ///
 /// Datasets: (a) the four generated materials, training and test images from disjoint halves
-/// of the Bonn views and lights; (b) the RTI sets in DATA/rti (one class each; every 4th light
+/// of the Bonn views and lights, and the same with every test image relit by a random
+/// illuminant and stored at 8 bits; (b) the RTI sets in DATA/rti (one class each; every 4th light
 /// trains); (c0) the photographs in DATA/textures cut into a 4x4 grid of crops, half the crops
 /// train, the other half test as they are; (c) the same test crops relit by random
 /// illuminants (colour, brightness, tungsten white balance) and stored at 8 bits. Missing
@@ -68,9 +70,9 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let start = Instant::now();
     let options = FeatureOptions::default();
     let mut skipped: Vec<String> = Vec::new();
-    let mut datasets: Vec<Dataset> = vec![synthetic_dataset(
-        args.size, args.seed, args.train, args.test,
-    )?];
+    let generated = synthetic_dataset(args.size, args.seed, args.train, args.test)?;
+    let relit = with_relit_tests(&generated, args.seed);
+    let mut datasets: Vec<Dataset> = vec![generated, relit];
     let rti = entries(&args.data.join("rti"), |p| p.is_dir());
     if rti.len() >= 2 {
         datasets.push(rti_dataset(&rti, 4)?);
