@@ -20,7 +20,7 @@ use super::{Bar, Global, emit};
 /// Datasets: (a) the four generated materials, training and test images from disjoint halves
 /// of the Bonn views and lights, and the same with every test image relit by a random
 /// illuminant and stored at 8 bits; (b) the RTI sets in DATA/rti (one class each; every 4th light
-/// trains); (c0) the photographs in DATA/textures cut into a 4x4 grid of crops, half the crops
+/// trains); (c0) the photographs in DATA/textures cut into a --grid of crops (4x4), half the crops
 /// train, the other half test as they are; (c) the same test crops relit by random
 /// illuminants (colour, brightness, tungsten white balance) and stored at 8 bits. Missing
 /// data folders are skipped with a note. Everything is deterministic in --seed.
@@ -42,6 +42,9 @@ pub struct Args {
     /// Test images per generated material.
     #[arg(long, default_value_t = 30)]
     test: usize,
+    /// The photographs are cut into GRID x GRID square crops.
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(2..=32))]
+    grid: u32,
     /// Relit copies of every held-out photograph crop.
     #[arg(long, default_value_t = 3)]
     relit: usize,
@@ -91,8 +94,13 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         })
     });
     if photos.len() >= 2 {
-        datasets.push(texture_dataset(&photos, 4, 0, args.seed)?);
-        datasets.push(texture_dataset(&photos, 4, args.relit.max(1), args.seed)?);
+        datasets.push(texture_dataset(&photos, args.grid as usize, 0, args.seed)?);
+        datasets.push(texture_dataset(
+            &photos,
+            args.grid as usize,
+            args.relit.max(1),
+            args.seed,
+        )?);
     } else {
         skipped.push(format!(
             "(c) needs at least two photographs in {}",
