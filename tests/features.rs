@@ -170,7 +170,7 @@ fn the_recognition_experiment_shows_the_invariant_features_beating_colour_histog
     ]);
     let report: serde_json::Value = serde_json::from_str(&out).unwrap();
     let datasets = report["datasets"].as_array().unwrap();
-    assert_eq!(datasets.len(), 4, "{report}");
+    assert_eq!(datasets.len(), 5, "{report}");
     let accuracy = |d: &serde_json::Value, method: &str| {
         d["results"]
             .as_array()

@@ -8,6 +8,7 @@ use btfmrf::btf::io::write_file_atomic;
 use btfmrf::features::FeatureOptions;
 use btfmrf::features::recognition::{
     Dataset, Method, Outcome, evaluate, rti_dataset, synthetic_dataset, texture_dataset,
+    with_relit_tests,
 };
 use btfmrf::progress::Progress;
 
@@ -17,8 +18,9 @@ use super::{Bar, Global, emit};
 /// images by the invariant MRF features, against colour histograms and LBP histograms.
 ///
 /// Datasets: (a) the four generated materials, training and test images from disjoint halves
-/// of the Bonn views and lights; (b) the RTI sets in DATA/rti (one class each; every 4th light
-/// trains); (c0) the photographs in DATA/textures cut into a 4x4 grid of crops, half the crops
+/// of the Bonn views and lights, and the same with every test image relit by a random
+/// illuminant and stored at 8 bits; (b) the RTI sets in DATA/rti (one class each; every 4th light
+/// trains); (c0) the photographs in DATA/textures cut into a --grid of crops (4x4), half the crops
 /// train, the other half test as they are; (c) the same test crops relit by random
 /// illuminants (colour, brightness, tungsten white balance) and stored at 8 bits. Missing
 /// data folders are skipped with a note. Everything is deterministic in --seed.
@@ -40,6 +42,9 @@ pub struct Args {
     /// Test images per generated material.
     #[arg(long, default_value_t = 30)]
     test: usize,
+    /// The photographs are cut into GRID x GRID square crops.
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(2..=32))]
+    grid: u32,
     /// Relit copies of every held-out photograph crop.
     #[arg(long, default_value_t = 3)]
     relit: usize,
@@ -68,9 +73,9 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let start = Instant::now();
     let options = FeatureOptions::default();
     let mut skipped: Vec<String> = Vec::new();
-    let mut datasets: Vec<Dataset> = vec![synthetic_dataset(
-        args.size, args.seed, args.train, args.test,
-    )?];
+    let generated = synthetic_dataset(args.size, args.seed, args.train, args.test)?;
+    let relit = with_relit_tests(&generated, args.seed);
+    let mut datasets: Vec<Dataset> = vec![generated, relit];
     let rti = entries(&args.data.join("rti"), |p| p.is_dir());
     if rti.len() >= 2 {
         datasets.push(rti_dataset(&rti, 4)?);
@@ -89,8 +94,13 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         })
     });
     if photos.len() >= 2 {
-        datasets.push(texture_dataset(&photos, 4, 0, args.seed)?);
-        datasets.push(texture_dataset(&photos, 4, args.relit.max(1), args.seed)?);
+        datasets.push(texture_dataset(&photos, args.grid as usize, 0, args.seed)?);
+        datasets.push(texture_dataset(
+            &photos,
+            args.grid as usize,
+            args.relit.max(1),
+            args.seed,
+        )?);
     } else {
         skipped.push(format!(
             "(c) needs at least two photographs in {}",

@@ -193,7 +193,7 @@ pub enum FeatureError {
 }
 
 /// Extracts the feature vector of a planar `(3, h, w)` linear RGB image (see the module docs
-/// for the list). Deterministic; about 10 ms for 256 x 256 (docs/BENCHMARKS.md).
+/// for the list). Deterministic; about 20 ms for 256 x 256 (docs/BENCHMARKS.md).
 ///
 /// # Errors
 /// A wrong shape (not 3 channels, or zero rows or columns) or a non-finite pixel.

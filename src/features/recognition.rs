@@ -131,11 +131,15 @@ pub fn synthetic_dataset(
         };
         let train_pairs = pick(&views[..vh], &lights[..lh], train_per_class);
         let test_pairs = pick(&views[vh..], &lights[lh..], test_per_class);
+        // Stored at 8 bits, like the Bonn measurements.
+        let stored = |v, l| -> Result<Array3<f32>, BtfError> {
+            Ok(relight(&btf.image(v, l)?, &Matrix3::identity(), true))
+        };
         for (v, l) in train_pairs {
-            train.push((class, btf.image(v, l)?));
+            train.push((class, stored(v, l)?));
         }
         for (v, l) in test_pairs {
-            test.push((class, btf.image(v, l)?));
+            test.push((class, stored(v, l)?));
         }
     }
     Ok(Dataset {
@@ -143,13 +147,34 @@ pub fn synthetic_dataset(
         description: format!(
             "{} materials; views and lights each split in halves at random (seed {seed}); \
              {train_per_class} training images per material from the first halves, \
-             {test_per_class} test images from the second halves",
+             {test_per_class} test images from the second halves; images stored at 8 bits",
             classes.len()
         ),
         classes,
         train,
         test,
     })
+}
+
+/// The same training images, and every test image replaced by a copy relit by a random
+/// illuminant ([`random_illuminant`]) and stored at 8 bits: recognition under an unknown
+/// illuminant colour and brightness on top of the dataset's own changes.
+pub fn with_relit_tests(dataset: &Dataset, seed: u64) -> Dataset {
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    Dataset {
+        name: format!("{}, relit tests", dataset.name),
+        description: format!(
+            "{}; every test image relit by a random illuminant and stored at 8 bits (seed {seed})",
+            dataset.description
+        ),
+        classes: dataset.classes.clone(),
+        train: dataset.train.clone(),
+        test: dataset
+            .test
+            .iter()
+            .map(|(class, image)| (*class, relight(image, &random_illuminant(&mut rng), true)))
+            .collect(),
+    }
 }
 
 /// 0..n in a seeded random order (Fisher-Yates).
