@@ -136,6 +136,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                     &ModelRenderOptions {
                         mapping,
                         seed: args.seed,
+                        max_texture_size: 1024,
                         ..Default::default()
                     },
                 )?;
