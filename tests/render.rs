@@ -315,6 +315,30 @@ fn the_render_command_reports_what_it_synthesized() {
     assert!(report["synthesis_seconds"].as_f64().unwrap() > 0.0);
     let image = io::read_image(&out).unwrap();
     assert_eq!(image.dim(), (3, 64, 96));
+
+    // An OBJ file with texture coordinates but no normals (computed on load).
+    let obj = dir.path().join("quad.obj");
+    std::fs::write(
+        &obj,
+        "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nvt 0 1\nvt 1 1\nvt 1 0\nvt 0 0\nf 4/4 3/3 2/2 1/1\n",
+    )
+    .unwrap();
+    let png = dir.path().join("quad.png");
+    common::ok(&[
+        "render",
+        model.to_str().unwrap(),
+        "--out",
+        png.to_str().unwrap(),
+        "--size",
+        "64",
+        "--mesh",
+        obj.to_str().unwrap(),
+        "--view",
+        "10,270",
+    ]);
+    let image = io::read_image(&png).unwrap();
+    let lit = image.iter().filter(|&&x| x > 0.01).count();
+    assert!(lit > image.len() / 8, "the OBJ quad covers {lit} values");
 }
 
 #[test]

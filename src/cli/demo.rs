@@ -121,7 +121,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                 Direction::new(75.0, 60.0),
             ] {
                 let scene = Scene {
-                    camera: Camera::orbit(Direction::new(35.0, 270.0), 3.4),
+                    camera: Camera::orbit(Direction::new(35.0, 270.0), 4.2),
                     light: Light {
                         direction: light,
                         distance: Some(4.0),
