@@ -366,7 +366,45 @@ fn bad_render_input_gives_one_clear_error() {
         obj.to_str().unwrap(),
     ]);
     assert!(e.contains("broken.obj"), "{e}");
+    for side in ["3", "16384"] {
+        let e = common::fails(&["render", model, "--out", out, "--texture-size", side]);
+        assert!(e.contains("--texture-size"), "{e}");
+    }
     let e = common::fails(&["render", model, "--out", out, "--mapping", "wobble"]);
     assert!(e.contains("wobble"), "{e}");
     assert!(!Path::new(out).exists());
+}
+
+#[test]
+fn the_demo_writes_a_report_whose_images_exist() {
+    if renderer().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    common::ok(&[
+        "demo",
+        "--out",
+        out.to_str().unwrap(),
+        "--size",
+        "32",
+        "--enlargement",
+        "64",
+        "--render-size",
+        "48",
+    ]);
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let images: Vec<&str> = report
+        .split("](")
+        .skip(1)
+        .filter_map(|s| s.split(')').next())
+        .collect();
+    // The enlargement and 2 meshes x 2 mappings x 3 lights.
+    assert_eq!(images.len(), 13, "{report}");
+    for name in images {
+        let image = io::read_image(&out.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let lit = image.iter().filter(|&&x| x > 0.01).count();
+        assert!(lit > image.len() / 100, "{name} is black");
+    }
+    assert!(out.join("sponge-2dcar.btfm").exists());
 }

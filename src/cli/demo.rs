@@ -45,6 +45,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
+    btfmrf::render::headless::check_size(args.render_size, args.render_size)?;
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut report = String::from("# btfmrf demo\n\n");

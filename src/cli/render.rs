@@ -89,6 +89,14 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
             args.repeats
         );
     }
+    if let Some(n) = args.texture_size
+        && (!n.is_power_of_two() || n > btfmrf::render::MAX_RENDER_SIDE as usize)
+    {
+        anyhow::bail!(
+            "invalid --texture-size {n}: a power of two within 1..={}",
+            btfmrf::render::MAX_RENDER_SIDE
+        );
+    }
     let model = format::read(&args.model)?;
     let detail = args.detail.unwrap_or(match args.mapping {
         Mapping::Displacement => 384,
