@@ -277,6 +277,63 @@ fn renders_are_deterministic_and_the_light_matters() {
 }
 
 #[test]
+fn a_shared_cache_synthesizes_each_subspace_once_and_changes_nothing() {
+    let Some(renderer) = renderer() else { return };
+    let model = golden_model();
+    let mesh = Mesh::sphere(32, 16, 1.0);
+    let cache = model
+        .synthesis_cache(&SynthesisOptions {
+            rows: 64,
+            cols: 64,
+            seed: 9,
+            tileable: true,
+        })
+        .unwrap();
+    let first = golden_scene(Direction::new(40.0, 0.0));
+    let a = renderer
+        .render_cached(&model, &cache, &mesh, &first, Mapping::Bump)
+        .unwrap();
+    assert_eq!(a.subspaces_synthesized, a.plan.clusters.len());
+    assert_eq!(cache.synthesized(), a.plan.clusters.len());
+    let again = renderer
+        .render_cached(&model, &cache, &mesh, &first, Mapping::Bump)
+        .unwrap();
+    assert_eq!(again.subspaces_synthesized, 0);
+    assert_eq!(again.image, a.image);
+    // Another light adds only what the cache lacks.
+    let b = renderer
+        .render_cached(
+            &model,
+            &cache,
+            &mesh,
+            &golden_scene(Direction::new(70.0, 180.0)),
+            Mapping::Bump,
+        )
+        .unwrap();
+    let new: Vec<_> = b
+        .plan
+        .clusters
+        .iter()
+        .filter(|k| !a.plan.clusters.contains(k))
+        .collect();
+    assert_eq!(b.subspaces_synthesized, new.len());
+    // The same picture as a render that synthesized just its own clusters.
+    let alone = renderer
+        .render_model(
+            &model,
+            &mesh,
+            &first,
+            &ModelRenderOptions {
+                seed: 9,
+                texture_size: Some(64),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+    assert_eq!(alone.image, a.image);
+}
+
+#[test]
 fn the_render_command_reports_what_it_synthesized() {
     if renderer().is_none() {
         return;

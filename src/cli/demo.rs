@@ -10,7 +10,6 @@ use btfmrf::analysis::{AnalysisOptions, analyze};
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction, io};
 use btfmrf::model::{ModelKind, format};
-use btfmrf::render::headless::ModelRenderOptions;
 use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
 use btfmrf::synthesis::SynthesisOptions;
 
@@ -103,9 +102,20 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     )?;
 
     let renderer = Renderer::new()?;
+    // One tileable cache for every render: each subspace image is synthesized once, when a
+    // scene first needs it, at the render size's power of two (at most 1024).
+    let side = (args.render_size as usize)
+        .next_power_of_two()
+        .clamp(1 << model.levels().max(1).saturating_sub(1), 1024);
+    let cache = model.synthesis_cache(&SynthesisOptions {
+        rows: side,
+        cols: side,
+        seed: args.seed,
+        tileable: true,
+    })?;
     writeln!(
         report,
-        "## Rendered ({})\n\n| mesh | mapping | light | image | subspaces | render s |\n|---|---|---|---|---|---|",
+        "## Rendered ({}, textures {side}^2)\n\n| mesh | mapping | light | image | subspaces used | newly synthesized | synthesis s | render s |\n|---|---|---|---|---|---|---|---|",
         renderer.ctx.describe()
     )?;
     for kind in [MeshKind::Sphere, MeshKind::Cloth] {
@@ -130,17 +140,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                     width: args.render_size,
                     height: args.render_size,
                 };
-                let r = renderer.render_model(
-                    &model,
-                    &mesh,
-                    &scene,
-                    &ModelRenderOptions {
-                        mapping,
-                        seed: args.seed,
-                        max_texture_size: 1024,
-                        ..Default::default()
-                    },
-                )?;
+                let r = renderer.render_cached(&model, &cache, &mesh, &scene, mapping)?;
                 let name = format!(
                     "{kind}-{mapping}-light{:.0}-{:.0}.png",
                     light.theta_deg, light.phi_deg
@@ -148,12 +148,13 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                 io::write_image(&out.join(&name), &r.image)?;
                 writeln!(
                     report,
-                    "| {kind} | {mapping} | {:.0},{:.0} | ![{name}]({name}) | {} of {} at {}^2 | {:.3} |",
+                    "| {kind} | {mapping} | {:.0},{:.0} | ![{name}]({name}) | {} of {} | {} | {:.2} | {:.3} |",
                     light.theta_deg,
                     light.phi_deg,
                     r.plan.clusters.len(),
                     r.subspaces_total,
-                    r.plan.texture_size,
+                    r.subspaces_synthesized,
+                    r.synthesis_seconds,
                     r.render_seconds
                 )?;
             }
