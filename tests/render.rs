@@ -465,3 +465,25 @@ fn the_demo_writes_a_report_whose_images_exist() {
     }
     assert!(out.join("sponge-2dcar.btfm").exists());
 }
+
+#[test]
+fn without_an_adapter_the_error_says_what_to_install() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.png");
+    // A backend that does not exist on Linux: no adapter at all.
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_btfmrf"))
+        .args(["render", golden_model_path().to_str().unwrap()])
+        .args(["--out", out.to_str().unwrap(), "--size", "32"])
+        .env("WGPU_BACKEND", "metal")
+        .output()
+        .unwrap();
+    if cfg!(target_os = "macos") {
+        return; // Metal exists there
+    }
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(stderr.contains("no GPU adapter found"), "{stderr}");
+    assert!(stderr.contains("mesa-vulkan-drivers"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!out.exists());
+}
