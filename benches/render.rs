@@ -64,6 +64,7 @@ fn frames(c: &mut Criterion) {
     for (name, mapping, mesh) in [
         ("plain texture", Mapping::Plain, &coarse),
         ("mrf bump", Mapping::Bump, &coarse),
+        ("mrf bump (384x192 grid)", Mapping::Bump, &fine),
         (
             "mrf displacement (384x192 grid)",
             Mapping::Displacement,

@@ -120,11 +120,10 @@ struct Interpolated {
     weight: vec3<f32>,
 }
 
-// The 3 measured directions around tangent-frame vector v and their barycentric weights
+// The 3 measured directions around projected tangent-frame direction q and their barycentric weights
 // (DirectionLut::lookup on the CPU): the nearest of the triangles of the 2 x 2 grid cells
-// around the query.
-fn interpolate_dir(v: vec3<f32>, is_view: bool) -> Interpolated {
-    let q = project_dir(v);
+// around the query, stopping at the first that contains it.
+fn interpolate_dir(q: vec2<f32>, is_view: bool) -> Interpolated {
     let f = (q + vec2<f32>(HALF_PI)) / PI * f32(DIRECTION_GRID) - vec2<f32>(0.5);
     let last = i32(DIRECTION_GRID) - 1;
     let x0 = clamp(i32(floor(f.x)), 0, last);
@@ -134,6 +133,10 @@ fn interpolate_dir(v: vec3<f32>, is_view: bool) -> Interpolated {
     var best = Interpolated(vec3<u32>(0u), vec3<f32>(1.0, 0.0, 0.0));
     var best_d2 = 1e30;
     for (var k = 0; k < 4; k++) {
+        // Inside a triangle already (up to rounding): no other can be nearer.
+        if (best_d2 < 1e-10) {
+            break;
+        }
         let x = select(x0, x1, (k & 1) == 1);
         let y = select(y0, y1, (k & 2) == 2);
         let cell = u32(y) * DIRECTION_GRID + u32(x);
@@ -164,9 +167,9 @@ fn interpolate_dir(v: vec3<f32>, is_view: bool) -> Interpolated {
     return best;
 }
 
-// Mean of max(0, n . l) over the texture for tangent-frame light l (bilinear in the table).
-fn mean_shading(l: vec3<f32>) -> f32 {
-    let q = project_dir(l);
+// Mean of max(0, n . l) over the texture for the projected tangent-frame light direction q
+// (bilinear in the table).
+fn mean_shading(q: vec2<f32>) -> f32 {
     let last = f32(SHADING_GRID - 1u);
     let f = clamp((q + vec2<f32>(HALF_PI)) / PI * last, vec2<f32>(0.0), vec2<f32>(last));
     let x0 = min(u32(floor(f.x)), SHADING_GRID - 2u);
@@ -224,8 +227,9 @@ fn shade_mrf(in: VertexOutput) -> vec4<f32> {
     if (l.z <= 0.0) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
-    let iv = interpolate_dir(v, true);
-    let il = interpolate_dir(l, false);
+    let ql = project_dir(l);
+    let iv = interpolate_dir(project_dir(v), true);
+    let il = interpolate_dir(ql, false);
     var sum = vec3<f32>(0.0);
     var total = 0.0;
     for (var a = 0; a < 3; a++) {
@@ -242,7 +246,7 @@ fn shade_mrf(in: VertexOutput) -> vec4<f32> {
     }
     var colour = sum / max(total, 1e-12);
     if (globals.params.y > 0.5) {
-        let mean = mean_shading(l);
+        let mean = mean_shading(ql);
         if (mean >= 1e-3) {
             colour *= max(dot(relief_here.xyz, l), 0.0) / mean;
         }

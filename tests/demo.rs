@@ -39,7 +39,10 @@ fn demo_writes_the_report_with_its_images_models_and_benchmark() {
         let path = out.join(link);
         assert!(path.exists(), "{link} is linked but missing");
         if link.ends_with(".png") {
-            image::open(&path).unwrap_or_else(|e| panic!("{link}: {e}"));
+            let image =
+                btfmrf::btf::io::read_image(&path).unwrap_or_else(|e| panic!("{link}: {e}"));
+            let lit = image.iter().filter(|&&x| x > 0.01).count();
+            assert!(lit > image.len() / 100, "{link} is black");
         }
     }
     // The enlargement is seamless-sized (a multiple of the pyramid step) and at least as large

@@ -277,6 +277,63 @@ fn renders_are_deterministic_and_the_light_matters() {
 }
 
 #[test]
+fn a_shared_cache_synthesizes_each_subspace_once_and_changes_nothing() {
+    let Some(renderer) = renderer() else { return };
+    let model = golden_model();
+    let mesh = Mesh::sphere(32, 16, 1.0);
+    let cache = model
+        .synthesis_cache(&SynthesisOptions {
+            rows: 64,
+            cols: 64,
+            seed: 9,
+            tileable: true,
+        })
+        .unwrap();
+    let first = golden_scene(Direction::new(40.0, 0.0));
+    let a = renderer
+        .render_cached(&model, &cache, &mesh, &first, Mapping::Bump)
+        .unwrap();
+    assert_eq!(a.subspaces_synthesized, a.plan.clusters.len());
+    assert_eq!(cache.synthesized(), a.plan.clusters.len());
+    let again = renderer
+        .render_cached(&model, &cache, &mesh, &first, Mapping::Bump)
+        .unwrap();
+    assert_eq!(again.subspaces_synthesized, 0);
+    assert_eq!(again.image, a.image);
+    // Another light adds only what the cache lacks.
+    let b = renderer
+        .render_cached(
+            &model,
+            &cache,
+            &mesh,
+            &golden_scene(Direction::new(70.0, 180.0)),
+            Mapping::Bump,
+        )
+        .unwrap();
+    let new: Vec<_> = b
+        .plan
+        .clusters
+        .iter()
+        .filter(|k| !a.plan.clusters.contains(k))
+        .collect();
+    assert_eq!(b.subspaces_synthesized, new.len());
+    // The same picture as a render that synthesized just its own clusters.
+    let alone = renderer
+        .render_model(
+            &model,
+            &mesh,
+            &first,
+            &ModelRenderOptions {
+                seed: 9,
+                texture_size: Some(64),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+    assert_eq!(alone.image, a.image);
+}
+
+#[test]
 fn the_render_command_reports_what_it_synthesized() {
     if renderer().is_none() {
         return;
@@ -315,6 +372,30 @@ fn the_render_command_reports_what_it_synthesized() {
     assert!(report["synthesis_seconds"].as_f64().unwrap() > 0.0);
     let image = io::read_image(&out).unwrap();
     assert_eq!(image.dim(), (3, 64, 96));
+
+    // An OBJ file with texture coordinates but no normals (computed on load).
+    let obj = dir.path().join("quad.obj");
+    std::fs::write(
+        &obj,
+        "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nvt 0 1\nvt 1 1\nvt 1 0\nvt 0 0\nf 4/4 3/3 2/2 1/1\n",
+    )
+    .unwrap();
+    let png = dir.path().join("quad.png");
+    common::ok(&[
+        "render",
+        model.to_str().unwrap(),
+        "--out",
+        png.to_str().unwrap(),
+        "--size",
+        "64",
+        "--mesh",
+        obj.to_str().unwrap(),
+        "--view",
+        "10,270",
+    ]);
+    let image = io::read_image(&png).unwrap();
+    let lit = image.iter().filter(|&&x| x > 0.01).count();
+    assert!(lit > image.len() / 8, "the OBJ quad covers {lit} values");
 }
 
 #[test]
@@ -342,7 +423,33 @@ fn bad_render_input_gives_one_clear_error() {
         obj.to_str().unwrap(),
     ]);
     assert!(e.contains("broken.obj"), "{e}");
+    for side in ["3", "16384"] {
+        let e = common::fails(&["render", model, "--out", out, "--texture-size", side]);
+        assert!(e.contains("--texture-size"), "{e}");
+    }
     let e = common::fails(&["render", model, "--out", out, "--mapping", "wobble"]);
     assert!(e.contains("wobble"), "{e}");
     assert!(!Path::new(out).exists());
+}
+
+#[test]
+fn without_an_adapter_the_error_says_what_to_install() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.png");
+    // A backend that does not exist on Linux: no adapter at all.
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_btfmrf"))
+        .args(["render", golden_model_path().to_str().unwrap()])
+        .args(["--out", out.to_str().unwrap(), "--size", "32"])
+        .env("WGPU_BACKEND", "metal")
+        .output()
+        .unwrap();
+    if cfg!(target_os = "macos") {
+        return; // Metal exists there
+    }
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(stderr.contains("no GPU adapter found"), "{stderr}");
+    assert!(stderr.contains("mesa-vulkan-drivers"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!out.exists());
 }

@@ -10,7 +10,6 @@ use btfmrf::btf::{Btf, Direction, ImageFormat};
 use btfmrf::eval::bench::{self, BenchOptions};
 use btfmrf::eval::montage::montage;
 use btfmrf::model::{MaterialModel, ModelKind, format};
-use btfmrf::render::headless::ModelRenderOptions;
 use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
 use btfmrf::synthesis::SynthesisOptions;
 use ndarray::Array3;
@@ -131,13 +130,24 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
 /// report's section (a table of the images, with what each scene needed synthesized).
 fn renders(model: &MaterialModel, dir: &Path, args: &Args) -> anyhow::Result<String> {
     let renderer = Renderer::new()?;
+    // One tileable cache for every render: each subspace image is synthesized once, when a
+    // scene first needs it, at the render size's power of two (at most 1024).
+    let side = (args.render_size as usize)
+        .next_power_of_two()
+        .clamp(1 << model.levels().max(1).saturating_sub(1), 1024);
+    let cache = model.synthesis_cache(&SynthesisOptions {
+        rows: side,
+        cols: side,
+        seed: args.seed,
+        tileable: true,
+    })?;
     let mut md = format!(
-        "## Rendered on objects ({})\n\n\
+        "## Rendered on objects ({}, textures {side}^2)\n\n\
          The 2D CAR model on a sphere and a draped cloth, camera at (35, 270), point light at \
-         distance 4. Only the subspace images the scene's view/light pairs touch are \
-         synthesized, at the resolution the screen footprint needs.\n\n\
-         | mesh | mapping | light | image | subspaces synthesized | texture | render s |\n\
-         |---|---|---|---|---|---|---:|\n",
+         distance 4. Only the subspace images the scenes' view/light pairs touch are \
+         synthesized, each once, when a scene first needs it.\n\n\
+         | mesh | mapping | light | image | subspaces used | newly synthesized | synthesis s \
+         | render s |\n|---|---|---|---|---:|---:|---:|---:|\n",
         renderer.ctx.describe()
     );
     std::fs::create_dir(dir.join("renders")).context("creating renders/")?;
@@ -150,30 +160,25 @@ fn renders(model: &MaterialModel, dir: &Path, args: &Args) -> anyhow::Result<Str
             };
             let mesh = kind.build(detail, 1.0)?;
             for (theta, phi) in RENDER_LIGHTS {
-                let light = Direction::new(theta, phi);
                 let scene = Scene {
-                    camera: Camera::orbit(Direction::new(35.0, 270.0), 3.4),
+                    camera: Camera::orbit(Direction::new(35.0, 270.0), 4.2),
                     light: Light {
-                        direction: light,
+                        direction: Direction::new(theta, phi),
                         distance: Some(4.0),
                     },
                     width: args.render_size,
                     height: args.render_size,
                 };
-                let options = ModelRenderOptions {
-                    mapping,
-                    seed: args.seed,
-                    ..Default::default()
-                };
-                let r = renderer.render_model(model, &mesh, &scene, &options)?;
+                let r = renderer.render_cached(model, &cache, &mesh, &scene, mapping)?;
                 let name = format!("renders/{kind}-{mapping}-light{theta:.0}-{phi:.0}.png");
                 io::write_image(&dir.join(&name), &r.image)?;
                 md.push_str(&format!(
                     "| {kind} | {mapping} | {theta:.0}, {phi:.0} | ![{name}]({name}) | {} of {} \
-                     | {}^2 | {:.2} |\n",
+                     | {} | {:.2} | {:.3} |\n",
                     r.plan.clusters.len(),
                     r.subspaces_total,
-                    r.plan.texture_size,
+                    r.subspaces_synthesized,
+                    r.synthesis_seconds,
                     r.render_seconds
                 ));
             }

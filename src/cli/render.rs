@@ -89,6 +89,14 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
             args.repeats
         );
     }
+    if let Some(n) = args.texture_size
+        && (!n.is_power_of_two() || n > btfmrf::render::MAX_RENDER_SIDE as usize)
+    {
+        anyhow::bail!(
+            "invalid --texture-size {n}: a power of two within 1..={}",
+            btfmrf::render::MAX_RENDER_SIDE
+        );
+    }
     let model = format::read(&args.model)?;
     let detail = args.detail.unwrap_or(match args.mapping {
         Mapping::Displacement => 384,
@@ -131,7 +139,7 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
             "height": height,
             "texture_size": out.plan.texture_size,
             "clusters": out.plan.clusters,
-            "subspaces_synthesized": out.plan.clusters.len(),
+            "subspaces_synthesized": out.subspaces_synthesized,
             "subspaces_total": out.subspaces_total,
             "texels_synthesized": out.texels_synthesized,
             "synthesis_seconds": out.synthesis_seconds,
@@ -145,7 +153,7 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
             height,
             args.mapping,
             out.adapter,
-            out.plan.clusters.len(),
+            out.subspaces_synthesized,
             out.subspaces_total,
             out.plan.texture_size,
             out.synthesis_seconds,

@@ -11,7 +11,8 @@ use super::plan::{ScenePlan, plan_scene};
 use super::scene::Scene;
 use super::{GpuContext, MAX_RENDER_SIDE, Mapping, RenderError, Result};
 use crate::model::MaterialModel;
-use crate::synthesis::SynthesisOptions;
+use crate::synthesis::{SynthesisCache, SynthesisOptions};
+use rayon::prelude::*;
 
 /// The colour format of offscreen targets: linear float, read back exactly.
 pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
@@ -34,7 +35,10 @@ pub struct RenderOutput {
     pub plan: ScenePlan,
     /// Subspace images in the model.
     pub subspaces_total: usize,
-    /// Texels synthesized (clusters x side^2).
+    /// Subspace images synthesized for this frame (all of the plan's, except those a cache
+    /// held already).
+    pub subspaces_synthesized: usize,
+    /// Texels synthesized (subspace images x side^2).
     pub texels_synthesized: u64,
     /// Seconds spent synthesizing subspace images and range map.
     pub synthesis_seconds: f64,
@@ -299,26 +303,103 @@ impl Renderer {
             tileable: true,
         };
         let cache = model.synthesis_cache_for(&plan.clusters, &synthesis)?;
-        let heights = match options.mapping {
-            Mapping::Displacement => model.range_heights(size, size, true),
+        let synthesized = plan.clusters.len();
+        self.finish(
+            model,
+            &cache,
+            luts,
+            plan,
+            synthesized,
+            mesh,
+            scene,
+            options.mapping,
+            start,
+        )
+    }
+
+    /// As [`Renderer::render_model`], drawing on (and adding to) `cache`, whose size, seed and
+    /// tileability are used as they are (`cache` must be tileable to wrap seamlessly): for
+    /// many frames of one material, each subspace image is synthesized once. The plan's
+    /// clusters that `cache` lacks are synthesized; the output counts only those.
+    ///
+    /// # Errors
+    /// An invalid size, a synthesis error or a device error.
+    pub fn render_cached(
+        &self,
+        model: &MaterialModel,
+        cache: &SynthesisCache,
+        mesh: &Mesh,
+        scene: &Scene,
+        mapping: Mapping,
+    ) -> Result<RenderOutput> {
+        check_size(scene.width, scene.height)?;
+        let start = Instant::now();
+        let luts = (
+            DirectionLut::new(&model.views)?,
+            DirectionLut::new(&model.lights)?,
+        );
+        let size = cache.options().rows;
+        if cache.options().cols != size {
+            return Err(RenderError::parameter(
+                "cache",
+                format!("{}x{size} is not square", cache.options().cols),
+            ));
+        }
+        let mut plan = plan_scene(model, mesh, scene, (&luts.0, &luts.1), (size, size));
+        plan.texture_size = size;
+        let missing: Vec<usize> = plan
+            .clusters
+            .iter()
+            .copied()
+            .filter(|&k| cache.get(k).is_none())
+            .collect();
+        missing
+            .par_iter()
+            .try_for_each(|&k| model.subspace_from_cache(cache, k).map(|_| ()))?;
+        self.finish(
+            model,
+            cache,
+            luts,
+            plan,
+            missing.len(),
+            mesh,
+            scene,
+            mapping,
+            start,
+        )
+    }
+
+    /// Uploads what `cache` holds and renders the frame.
+    #[allow(clippy::too_many_arguments)]
+    fn finish(
+        &self,
+        model: &MaterialModel,
+        cache: &SynthesisCache,
+        luts: (DirectionLut, DirectionLut),
+        plan: ScenePlan,
+        synthesized: usize,
+        mesh: &Mesh,
+        scene: &Scene,
+        mapping: Mapping,
+        start: Instant,
+    ) -> Result<RenderOutput> {
+        let (rows, cols) = (cache.options().rows, cache.options().cols);
+        let heights = match mapping {
+            Mapping::Displacement => model.range_heights(rows, cols, cache.options().tileable),
             _ => None,
         };
-        let tables = MaterialTables::new(model, &cache, Some(luts))?;
+        let tables = MaterialTables::new(model, cache, Some(luts))?;
         let synthesis_seconds = start.elapsed().as_secs_f64();
         let start = Instant::now();
-        let material = GpuMaterial::new(
-            &self.ctx,
-            &self.pipelines,
-            &cache,
-            heights.as_ref(),
-            &tables,
-        )?;
+        let material =
+            GpuMaterial::new(&self.ctx, &self.pipelines, cache, heights.as_ref(), &tables)?;
         let gpu_mesh = GpuMesh::new(&self.ctx, mesh);
-        let image = self.render(&material, &gpu_mesh, scene, options.mapping)?;
+        let image = self.render(&material, &gpu_mesh, scene, mapping)?;
         let render_seconds = start.elapsed().as_secs_f64();
         Ok(RenderOutput {
             image,
-            texels_synthesized: (plan.clusters.len() * size * size) as u64,
+            subspaces_synthesized: synthesized,
+            texels_synthesized: (synthesized * rows * cols) as u64,
             plan,
             subspaces_total: model.subspaces.len(),
             synthesis_seconds,

@@ -86,6 +86,9 @@ impl DirectionLut {
         let (x1, y1) = (clamp(fx + 1.0), clamp(fy + 1.0));
         let mut best = (f64::INFINITY, [0usize; 3], [1.0, 0.0, 0.0]);
         for (x, y) in [(x0, y0), (x1, y0), (x0, y1), (x1, y1)] {
+            if best.0 < 1e-10 {
+                break; // inside a triangle already (up to rounding)
+            }
             let cell = self.cells[y * DIRECTION_GRID + x];
             let tri = [cell[0], cell[1], cell[2]].map(|i| i as usize);
             let p = tri.map(|i| self.points[i].map(f64::from));

@@ -19,8 +19,8 @@ use crate::model::MaterialModel;
 pub struct ScenePlan {
     /// The clusters (subspace images) the visible surface draws on, ascending.
     pub clusters: Vec<usize>,
-    /// Texture side, texels: a power of two covering the largest screen footprint of one
-    /// texture repetition, within `[min, max]` of [`plan_scene`].
+    /// Texture side, texels: the power of two nearest (on a log scale) to the largest screen
+    /// footprint of one texture repetition, in pixels, within `[min, max]` of [`plan_scene`].
     pub texture_size: usize,
 }
 
@@ -144,7 +144,9 @@ pub fn plan_scene(
             }
         }
     }
-    let wanted = (texels_per_uv.ceil().max(1.0) as usize).next_power_of_two();
+    // The nearest power of two on a log scale: texels at most sqrt(2) larger or smaller than
+    // pixels (linear filtering covers that; no mipmaps are needed).
+    let wanted = 1usize << (texels_per_uv.max(1.0).log2().round() as u32).min(30);
     ScenePlan {
         clusters: clusters.into_iter().collect(),
         texture_size: wanted.clamp(min_size, max_size.max(min_size)),

@@ -223,6 +223,11 @@ impl App<'_> {
             v.pipelines.draw(pass, mapping, material, mesh)
         });
         v.ctx.queue.submit([encoder.finish()]);
+        // Wait for the GPU so that the title shows the real frame time, not the submission's.
+        v.ctx
+            .device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| RenderError::Device(e.to_string()))?;
         self.frames += 1;
         let last = self.options.frames.is_some_and(|n| self.frames >= n);
         if last && let Some(path) = self.options.screenshot.clone() {
