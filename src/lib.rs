@@ -37,6 +37,7 @@ pub mod decompose;
 pub mod eval;
 mod fft;
 pub mod geometry;
+pub mod lpca;
 pub mod model;
 pub mod mrf;
 pub mod progress;

@@ -4,6 +4,7 @@ mod analyze;
 mod convert;
 mod generate;
 mod info;
+mod lpca;
 mod synthesize;
 
 use std::io::IsTerminal;
@@ -26,6 +27,7 @@ use btfmrf::progress::Progress;
 ///   btfmrf convert sponge.zip --out sponge-exr --format exr
 ///   btfmrf analyze sponge.zip --model 2dcar --out sponge.btfm
 ///   btfmrf synthesize sponge.btfm --size 1024 --view 0,0 --light 45,90 --out big.png
+///   btfmrf lpca sponge.zip --clusters 32 --components 8 --out sponge.lpca
 #[derive(Debug, Parser)]
 #[command(name = "btfmrf", version, verbatim_doc_comment)]
 pub struct Cli {
@@ -50,6 +52,7 @@ enum Command {
     Convert(convert::Args),
     Analyze(analyze::Args),
     Synthesize(synthesize::Args),
+    Lpca(lpca::Args),
 }
 
 /// Parses the command line and runs the subcommand.
@@ -61,6 +64,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Convert(args) => convert::run(args, &cli.global),
         Command::Analyze(args) => analyze::run(args, &cli.global),
         Command::Synthesize(args) => synthesize::run(args, &cli.global),
+        Command::Lpca(args) => lpca::run(args, &cli.global),
     }
 }
 
