@@ -4,12 +4,14 @@
 //! The rows of an `n x d` matrix `Y` (already centred) have principal directions equal to the
 //! right singular vectors of `Y`. Three routes, chosen by shape:
 //!
-//! - **Gram** (`n <= d`, `n <= EXACT_MAX`): eigen decomposition of `Y Yᵀ` (`n x n`, in f64), then
+//! - **Gram** (`n <= d`, `n` small): eigen decomposition of `Y Yᵀ` (`n x n`, in f64), then
 //!   `e_i = Yᵀ u_i / sqrt(λ_i)`. Exact; the route of the paper for clusters of a few hundred
 //!   texels.
-//! - **Covariance** (`d <= EXACT_MAX`): eigen decomposition of `Yᵀ Y` (`d x d`). Exact; used
+//! - **Covariance** (`d` small): eigen decomposition of `Yᵀ Y` (`d x d`). Exact; used
 //!   when the vectors are short (per-view reflectance fields: d = 81 lights x 3).
-//! - **Randomized subspace iteration** (Halko, Martinsson and Tropp 2011, Alg. 4.4) otherwise:
+//! - **Randomized subspace iteration** (Halko, Martinsson and Tropp 2011, Alg. 4.4) when
+//!   both sides are larger than about `10 (c + 10)` (at least [`EXACT_MIN`], at most
+//!   [`EXACT_MAX`]), where it is cheaper than the exact routes:
 //!   a seeded Gaussian start (optionally warm-started with the previous basis), a few power
 //!   iterations with re-orthonormalisation, and a small exact problem at the end. Its cost is
 //!   `O(n d (c + p))` per pass instead of `O(min(n, d)^3)`.
@@ -25,9 +27,11 @@ use rand_pcg::Pcg64Mcg;
 
 use super::error::{LpcaError, Result};
 
-/// The largest Gram or covariance side decomposed exactly; larger problems use randomized
-/// subspace iteration.
+/// The largest Gram or covariance side ever decomposed exactly; larger problems use
+/// randomized subspace iteration.
 pub const EXACT_MAX: usize = 1024;
+/// Gram or covariance sides up to this are always decomposed exactly.
+pub const EXACT_MIN: usize = 256;
 /// Extra columns carried by randomized subspace iteration beyond the requested components.
 const OVERSAMPLE: usize = 10;
 /// Power iterations of randomized subspace iteration.
@@ -78,9 +82,13 @@ pub fn principal_directions(
     }
     let ym = MatRef::from_row_major_slice(y, n, d);
     // Candidate directions as columns of a d x k matrix, with their energies.
-    let (dirs, energies) = if n <= d && n <= EXACT_MAX {
+    // The exact routes cost about min(n, d)^2 max(n, d) multiply-adds, the randomized one
+    // about min(n, d) max(n, d) l (2q + 2): exact while min(n, d) is below that factor.
+    let l = c + OVERSAMPLE;
+    let exact_limit = EXACT_MAX.min((l * (2 * POWER_ITERATIONS + 2)).max(EXACT_MIN));
+    let (dirs, energies) = if n <= d && n <= exact_limit {
         gram_route(ym, c, par)?
-    } else if d <= EXACT_MAX {
+    } else if d <= exact_limit {
         covariance_route(ym, c, par)?
     } else {
         randomized_route(ym, c, seed, warm, par)?
@@ -358,6 +366,11 @@ mod tests {
     #[test]
     fn covariance_route_matches_dense_reference() {
         check_against_reference(500, 60, 5); // d small: covariance
+    }
+
+    #[test]
+    fn randomized_choice_matches_dense_reference() {
+        check_against_reference(400, 300, 5); // both sides above the exact limit
     }
 
     #[test]
