@@ -250,6 +250,9 @@ fn broken_model_files_fail_with_one_line_naming_the_file() {
     o.evaluate = false;
     let (m, _) = LpcaModel::fit(&btf, &o, &NoProgress).unwrap();
     let bytes = m.to_bytes();
+    let mut too_many = o;
+    too_many.components = 5000;
+    assert!(LpcaModel::fit(&btf, &too_many, &NoProgress).is_err());
     let cases: Vec<(&str, Vec<u8>)> = vec![
         ("truncated.lpca", bytes[..bytes.len() / 2].to_vec()),
         ("flipped.lpca", {

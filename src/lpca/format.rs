@@ -48,10 +48,25 @@ fn shape(
     }
 }
 
+/// The payload length, bytes, of a model of this shape with `clusters` clusters per
+/// factorization (saturating; compare with [`MAX_PAYLOAD`]).
+pub fn payload_len(
+    method: Method,
+    width: usize,
+    height: usize,
+    views: usize,
+    lights: usize,
+    clusters: usize,
+    components: usize,
+) -> u64 {
+    let (count, rows, dim) = shape(method, width, height, views, lights);
+    let [count, rows, dim, k, c] = [count, rows, dim, clusters, components].map(|v| v as u64);
+    let indices = if k > 1 { 2 * rows } else { 0 };
+    let part = 2 + 2 * k.saturating_mul(c + 1).saturating_mul(dim) + indices + 2 * rows * c;
+    1 + 4 + 4 + 2 + 2 + 8 * views as u64 + 2 + 8 * lights as u64 + count.saturating_mul(part)
+}
+
 /// Serialises a model (header, payload, CRC-32 of the payload).
-///
-/// # Panics
-/// Never for a model built by this library (sizes are checked when fitting and parsing).
 pub fn to_bytes(model: &LpcaModel) -> Vec<u8> {
     let mut p = Vec::new();
     p.push(method_code(model.method()));
@@ -85,7 +100,9 @@ pub fn to_bytes(model: &LpcaModel) -> Vec<u8> {
     out.extend_from_slice(&MAGIC);
     out.extend_from_slice(&VERSION.to_le_bytes());
     out.extend_from_slice(&0u16.to_le_bytes());
-    out.extend_from_slice(&(u32::try_from(p.len()).expect("payload under 4 GiB")).to_le_bytes());
+    // A payload over the limit (checked by `write` and before fitting) is marked as such, so
+    // that no reader accepts a wrapped length.
+    out.extend_from_slice(&u32::try_from(p.len()).unwrap_or(u32::MAX).to_le_bytes());
     out.extend_from_slice(&p);
     out.extend_from_slice(&crc32fast::hash(&p).to_le_bytes());
     out
@@ -296,7 +313,17 @@ fn parse(bytes: &[u8]) -> Parse<LpcaModel> {
 /// # Errors
 /// The destination cannot be written.
 pub fn write(model: &LpcaModel, path: &Path) -> Result<()> {
-    Ok(io::write_file_atomic(path, &to_bytes(model))?)
+    let bytes = to_bytes(model);
+    if bytes.len() - 16 > MAX_PAYLOAD as usize {
+        return Err(LpcaError::Format {
+            path: path.to_path_buf(),
+            reason: format!(
+                "the model needs {} bytes, above the format's {MAX_PAYLOAD}-byte limit",
+                bytes.len()
+            ),
+        });
+    }
+    Ok(io::write_file_atomic(path, &bytes)?)
 }
 
 /// Reads a model file (at most [`MAX_PAYLOAD`] + 16 bytes are read).
@@ -373,6 +400,16 @@ mod tests {
             let back = from_bytes(&bytes, Path::new("m.lpca")).unwrap();
             assert_eq!(&back, model, "{:?}", model.method());
             assert_eq!(to_bytes(&back), bytes);
+            let predicted = payload_len(
+                model.method(),
+                model.width(),
+                model.height(),
+                model.views().len(),
+                model.lights().len(),
+                model.clusters(),
+                model.components(),
+            );
+            assert_eq!(predicted as usize, bytes.len() - 16);
             assert_eq!(
                 back.reconstruct(40, 7).unwrap(),
                 model.reconstruct(40, 7).unwrap()

@@ -50,6 +50,9 @@ use crate::btf::{Btf, BtfError, Direction, DirectionSet, ImageSource};
 use crate::color::{Srgb8Encoder, delta_e76, linear_to_lab, srgb8_to_linear_table};
 use crate::progress::Progress;
 
+/// The most principal components per cluster accepted.
+pub const MAX_COMPONENTS: usize = 1024;
+
 /// Which factorization a model holds (see the table in the module documentation).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -191,6 +194,31 @@ impl LpcaModel {
             per_view_delta_e: Vec::new(),
             per_image_delta_e: Vec::new(),
         };
+        if options.components > MAX_COMPONENTS {
+            return Err(LpcaError::parameter(
+                "--components",
+                format!("{} is above {MAX_COMPONENTS}", options.components),
+            ));
+        }
+        let bytes = format::payload_len(
+            options.method,
+            w,
+            h,
+            nv,
+            nl,
+            report.clusters,
+            options.components,
+        );
+        if bytes > u64::from(format::MAX_PAYLOAD) {
+            return Err(LpcaError::parameter(
+                "--components",
+                format!(
+                    "the model would take {bytes} bytes, above the .lpca limit of {} bytes; \
+                     use fewer clusters or components",
+                    format::MAX_PAYLOAD
+                ),
+            ));
+        }
         let cluster_options = ClusterOptions {
             clusters: report.clusters,
             components: options.components,
