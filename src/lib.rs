@@ -38,6 +38,7 @@ pub mod eval;
 pub mod features;
 mod fft;
 pub mod geometry;
+pub mod lpca;
 pub mod model;
 pub mod mrf;
 pub mod progress;

@@ -7,6 +7,7 @@ mod demo;
 mod features;
 mod generate;
 mod info;
+mod lpca;
 mod recognize;
 mod render;
 mod synthesize;
@@ -35,6 +36,7 @@ use btfmrf::progress::Progress;
 ///   btfmrf features brick.png --json
 ///   btfmrf recognize --out recognition.md
 ///   btfmrf render sponge.btfm --out sphere.png --mesh sphere --mapping bump
+///   btfmrf lpca sponge.zip --clusters 32 --components 8 --out sponge.lpca
 #[derive(Debug, Parser)]
 #[command(name = "btfmrf", version, verbatim_doc_comment)]
 pub struct Cli {
@@ -59,12 +61,13 @@ enum Command {
     Convert(convert::Args),
     Analyze(analyze::Args),
     Synthesize(synthesize::Args),
+    Lpca(lpca::Args),
     Bench(bench::Args),
-    Demo(demo::Args),
-    Features(features::Args),
-    Recognize(recognize::Args),
     Render(render::Args),
     View(view::Args),
+    Features(features::Args),
+    Recognize(recognize::Args),
+    Demo(demo::Args),
 }
 
 /// Parses the command line and runs the subcommand.
@@ -76,12 +79,13 @@ pub fn run() -> anyhow::Result<()> {
         Command::Convert(args) => convert::run(args, &cli.global),
         Command::Analyze(args) => analyze::run(args, &cli.global),
         Command::Synthesize(args) => synthesize::run(args, &cli.global),
+        Command::Lpca(args) => lpca::run(args, &cli.global),
         Command::Bench(args) => bench::run(args, &cli.global),
-        Command::Demo(args) => demo::run(args, &cli.global),
-        Command::Features(args) => features::run(args, &cli.global),
-        Command::Recognize(args) => recognize::run(args, &cli.global),
         Command::Render(args) => render::run(args, &cli.global),
         Command::View(args) => view::run(args, &cli.global),
+        Command::Features(args) => features::run(args, &cli.global),
+        Command::Recognize(args) => recognize::run(args, &cli.global),
+        Command::Demo(args) => demo::run(args, &cli.global),
     }
 }
 

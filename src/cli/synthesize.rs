@@ -1,10 +1,12 @@
-//! `btfmrf synthesize`: images of any size from a `.btfm` model.
+//! `btfmrf synthesize`: images of any size from a `.btfm` model, or the measured tile rebuilt
+//! from a `.lpca` model.
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
 use btfmrf::btf::{Btf, BtfError, Direction, DirectionSet, ImageSource, io};
+use btfmrf::lpca;
 use btfmrf::model::{MaterialModel, format};
 use btfmrf::synthesis::{SynthesisCache, SynthesisOptions};
 use ndarray::Array3;
@@ -25,11 +27,12 @@ use super::{Bar, Global, emit};
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
-    /// The model file (.btfm).
+    /// The model file (.btfm, or .lpca: recognised by its first bytes).
     model: PathBuf,
-    /// Output size: N (square) or WxH, pixels.
+    /// Output size: N (square) or WxH, pixels. Required for .btfm; a .lpca model rebuilds
+    /// its measured tile only, so for it the size may be omitted or must match.
     #[arg(long, value_parser = parse_size)]
-    size: (usize, usize),
+    size: Option<(usize, usize)>,
     /// A view direction "theta,phi" in degrees (repeatable).
     #[arg(long, value_parser = parse_direction)]
     view: Vec<Direction>,
@@ -110,8 +113,16 @@ impl ImageSource for ModelSource {
 }
 
 pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
+    if is_lpca_file(&args.model)? {
+        return run_lpca(args, global);
+    }
     let model = format::read(&args.model)?;
-    let (rows, cols) = args.size;
+    let Some((rows, cols)) = args.size else {
+        bail!(
+            "--size is required for a .btfm model ({})",
+            args.model.display()
+        );
+    };
     let options = SynthesisOptions {
         rows,
         cols,
@@ -218,6 +229,130 @@ fn report(
         emit(format!(
             "wrote {} ({images} image(s); {used} of {total} subspace images synthesized) in {seconds:.3} s",
             out.display()
+        ))
+    }
+}
+
+/// Whether the file starts with the `.lpca` magic bytes (the extension is not trusted).
+fn is_lpca_file(path: &std::path::Path) -> anyhow::Result<bool> {
+    use std::io::Read;
+    let mut head = Vec::with_capacity(4);
+    std::fs::File::open(path)
+        .and_then(|f| f.take(4).read_to_end(&mut head))
+        .with_context(|| format!("reading {}", path.display()))?;
+    Ok(lpca::format::is_lpca(&head))
+}
+
+/// Images of an LPCA model for any view and light directions (3 x 3 interpolation).
+struct LpcaSource {
+    model: lpca::LpcaModel,
+    views: DirectionSet,
+    lights: DirectionSet,
+}
+
+impl ImageSource for LpcaSource {
+    fn load(&self, view: usize, light: usize) -> Result<Array3<f32>, BtfError> {
+        let (v, l) = (self.views.as_slice()[view], self.lights.as_slice()[light]);
+        self.model
+            .reconstruct_direction(&v, &l)
+            .map_err(|e| BtfError::Image {
+                file: self.describe(view, light),
+                reason: e.to_string(),
+            })
+    }
+
+    fn describe(&self, view: usize, light: usize) -> String {
+        format!("reconstructed image (view {view}, light {light})")
+    }
+}
+
+/// `synthesize` for a `.lpca` model: the measured tile rebuilt under the requested (or all
+/// measured) directions.
+fn run_lpca(args: Args, global: &Global) -> anyhow::Result<()> {
+    let model = lpca::format::read(&args.model)?;
+    let (h, w) = (model.height(), model.width());
+    if let Some((rows, cols)) = args.size
+        && (rows, cols) != (h, w)
+    {
+        bail!(
+            "{}: --size {cols}x{rows} differs from the model's {w}x{h}; an LPCA model rebuilds \
+             its measured tile only (omit --size)",
+            args.model.display()
+        );
+    }
+    if args.tileable {
+        bail!(
+            "{}: --tileable does not apply to an LPCA model (it rebuilds the measured tile)",
+            args.model.display()
+        );
+    }
+    let start = Instant::now();
+    let out_name = args.out.to_string_lossy().to_ascii_lowercase();
+    let single =
+        out_name.ends_with(".png") || out_name.ends_with(".exr") || out_name.ends_with(".jpg");
+    let images = if single {
+        let (Some(view), Some(light), 1, 1) = (
+            args.view.first(),
+            args.light.first(),
+            args.view.len(),
+            args.light.len(),
+        ) else {
+            bail!(
+                "one image (--out {}) needs exactly one --view and one --light",
+                args.out.display()
+            );
+        };
+        let image = model.reconstruct_direction(view, light)?;
+        io::write_image(&args.out, &image)
+            .with_context(|| format!("writing {}", args.out.display()))?;
+        1
+    } else {
+        let btf = if args.view.is_empty() && args.light.is_empty() {
+            model.into_btf()?
+        } else {
+            let views = if args.view.is_empty() {
+                model.views().clone()
+            } else {
+                DirectionSet::new(args.view.clone())?
+            };
+            let lights = if args.light.is_empty() {
+                model.lights().clone()
+            } else {
+                DirectionSet::new(args.light.clone())?
+            };
+            let source = LpcaSource {
+                model,
+                views: views.clone(),
+                lights: lights.clone(),
+            };
+            Btf::from_source(
+                "reconstructed",
+                views,
+                lights,
+                w as u32,
+                h as u32,
+                Box::new(source),
+            )?
+        };
+        io::write_ubo2003(
+            &btf,
+            &args.out,
+            args.format.with_quality(90),
+            &Bar::new(global),
+        )?;
+        btf.image_count()
+    };
+    let seconds = start.elapsed().as_secs_f64();
+    if args.json {
+        emit(serde_json::json!({
+            "out": args.out,
+            "images": images,
+            "synthesis_seconds": seconds,
+        }))
+    } else {
+        emit(format!(
+            "wrote {} ({images} image(s) rebuilt from the LPCA model) in {seconds:.3} s",
+            args.out.display()
         ))
     }
 }

@@ -1,0 +1,505 @@
+//! The `.lpca` model file: versioned, checksummed, little-endian, decoded with bounded
+//! allocations. The layout is documented byte by byte in `docs/FORMAT.md` ("The .lpca model
+//! file").
+//!
+//! Every array is IEEE half precision (the paper's 16-bit floats, section 4.2), so a model of
+//! 128 x 128 Bonn data with K = 32, C = 8 is about 11 MB.
+
+use std::path::Path;
+
+use half::f16;
+
+use super::cluster::Factorization;
+use super::error::{LpcaError, Result};
+use super::{LpcaModel, Method};
+use crate::btf::{Direction, DirectionSet, io};
+
+/// The four bytes every `.lpca` file starts with.
+pub const MAGIC: [u8; 4] = *b"LPCA";
+/// The format version this library writes and reads.
+pub const VERSION: u16 = 1;
+/// The largest payload accepted, bytes.
+pub const MAX_PAYLOAD: u32 = 1 << 30;
+/// The largest width or height accepted, texels.
+pub const MAX_SIDE: u32 = 16384;
+
+fn method_code(m: Method) -> u8 {
+    match m {
+        Method::Lpca => 0,
+        Method::PcaBtf => 1,
+        Method::PcaRf => 2,
+    }
+}
+
+/// Rows and row length of the factorizations of a model of this shape, and how many there
+/// are.
+fn shape(
+    method: Method,
+    width: usize,
+    height: usize,
+    nv: usize,
+    nl: usize,
+) -> (usize, usize, usize) {
+    let n = width * height;
+    match method {
+        Method::Lpca => (1, n, nv * nl * 3),
+        Method::PcaBtf => (1, nv * nl, 3 * n),
+        Method::PcaRf => (nv, n, nl * 3),
+    }
+}
+
+/// The payload length, bytes, of a model of this shape with `clusters` clusters per
+/// factorization (saturating; compare with [`MAX_PAYLOAD`]).
+pub fn payload_len(
+    method: Method,
+    width: usize,
+    height: usize,
+    views: usize,
+    lights: usize,
+    clusters: usize,
+    components: usize,
+) -> u64 {
+    let (count, rows, dim) = shape(method, width, height, views, lights);
+    let [count, rows, dim, k, c] = [count, rows, dim, clusters, components].map(|v| v as u64);
+    let indices = if k > 1 { 2 * rows } else { 0 };
+    let part = 2 + 2 * k.saturating_mul(c + 1).saturating_mul(dim) + indices + 2 * rows * c;
+    1 + 4 + 4 + 2 + 2 + 8 * views as u64 + 2 + 8 * lights as u64 + count.saturating_mul(part)
+}
+
+/// Serialises a model (header, payload, CRC-32 of the payload).
+pub fn to_bytes(model: &LpcaModel) -> Vec<u8> {
+    let mut p = Vec::new();
+    p.push(method_code(model.method()));
+    p.extend_from_slice(&(model.width() as u32).to_le_bytes());
+    p.extend_from_slice(&(model.height() as u32).to_le_bytes());
+    p.extend_from_slice(&(model.components() as u16).to_le_bytes());
+    for set in [model.views(), model.lights()] {
+        p.extend_from_slice(&(set.len() as u16).to_le_bytes());
+        for d in set.iter() {
+            p.extend_from_slice(&(d.theta_deg as f32).to_le_bytes());
+            p.extend_from_slice(&(d.phi_deg as f32).to_le_bytes());
+        }
+    }
+    let halves = |p: &mut Vec<u8>, v: &[f32]| {
+        for &x in v {
+            p.extend_from_slice(&f16::from_f32(x).to_bits().to_le_bytes());
+        }
+    };
+    for f in model.parts() {
+        p.extend_from_slice(&(f.clusters() as u16).to_le_bytes());
+        halves(&mut p, &f.means);
+        halves(&mut p, &f.bases);
+        if f.clusters() > 1 {
+            for &a in &f.assignment {
+                p.extend_from_slice(&a.to_le_bytes());
+            }
+        }
+        halves(&mut p, &f.weights);
+    }
+    let mut out = Vec::with_capacity(p.len() + 16);
+    out.extend_from_slice(&MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&0u16.to_le_bytes());
+    // A payload over the limit (checked by `write` and before fitting) is marked as such, so
+    // that no reader accepts a wrapped length.
+    out.extend_from_slice(&u32::try_from(p.len()).unwrap_or(u32::MAX).to_le_bytes());
+    out.extend_from_slice(&p);
+    out.extend_from_slice(&crc32fast::hash(&p).to_le_bytes());
+    out
+}
+
+type Parse<T> = std::result::Result<T, String>;
+
+/// Reads from a byte slice; every read checks the remaining length first.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Parse<&'a [u8]> {
+        if self.bytes.len() - self.pos < n {
+            return Err(format!("truncated at byte {} (wanted {n} more)", self.pos));
+        }
+        let s = &self.bytes[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(s)
+    }
+    fn u8(&mut self) -> Parse<u8> {
+        Ok(self.take(1)?[0])
+    }
+    fn u16(&mut self) -> Parse<u16> {
+        Ok(u16::from_le_bytes(
+            self.take(2)?.try_into().expect("2 bytes"),
+        ))
+    }
+    fn u32(&mut self) -> Parse<u32> {
+        Ok(u32::from_le_bytes(
+            self.take(4)?.try_into().expect("4 bytes"),
+        ))
+    }
+    fn f32(&mut self) -> Parse<f32> {
+        Ok(f32::from_le_bytes(
+            self.take(4)?.try_into().expect("4 bytes"),
+        ))
+    }
+    /// Checks that `count` items of `size` bytes fit in what is left, before allocating.
+    fn ensure(&self, count: usize, size: usize, what: &str) -> Parse<()> {
+        match count.checked_mul(size) {
+            Some(b) if b <= self.bytes.len() - self.pos => Ok(()),
+            _ => Err(format!(
+                "{what}: {count} values at byte {} exceed the file",
+                self.pos
+            )),
+        }
+    }
+    fn halves(&mut self, count: usize, what: &str) -> Parse<Vec<f32>> {
+        self.ensure(count, 2, what)?;
+        let raw = self.take(count * 2)?;
+        raw.chunks_exact(2)
+            .map(|b| {
+                let v = f16::from_bits(u16::from_le_bytes([b[0], b[1]]));
+                if v.is_finite() {
+                    Ok(v.to_f32())
+                } else {
+                    Err(format!("{what}: a non-finite number"))
+                }
+            })
+            .collect()
+    }
+    fn directions(&mut self, what: &str) -> Parse<DirectionSet> {
+        let count = usize::from(self.u16()?);
+        self.ensure(count, 8, what)?;
+        let dirs = (0..count)
+            .map(|_| {
+                Ok(Direction::new(
+                    f64::from(self.f32()?),
+                    f64::from(self.f32()?),
+                ))
+            })
+            .collect::<Parse<Vec<_>>>()?;
+        DirectionSet::new(dirs).map_err(|e| format!("{what}: {e}"))
+    }
+}
+
+/// Parses a model from bytes; `path` is only used in messages.
+///
+/// # Errors
+/// [`LpcaError::Format`] for a wrong magic, version, size or checksum, a truncated or
+/// inconsistent payload, or out-of-range values. Nothing is allocated beyond what the bytes
+/// can actually hold.
+pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<LpcaModel> {
+    parse(bytes).map_err(|reason| LpcaError::Format {
+        path: path.to_path_buf(),
+        reason,
+    })
+}
+
+/// Whether `bytes` start like a `.lpca` file.
+pub fn is_lpca(bytes: &[u8]) -> bool {
+    bytes.starts_with(&MAGIC)
+}
+
+fn parse(bytes: &[u8]) -> Parse<LpcaModel> {
+    let mut header = Reader { bytes, pos: 0 };
+    if header
+        .take(4)
+        .map_err(|_| "not a .lpca model (too short)".to_string())?
+        != MAGIC
+    {
+        return Err("not a .lpca model (wrong magic bytes)".into());
+    }
+    let version = header.u16()?;
+    if version != VERSION {
+        return Err(format!(
+            "format version {version}; this build reads version {VERSION}"
+        ));
+    }
+    let _flags = header.u16()?;
+    let len = header.u32()?;
+    if len > MAX_PAYLOAD {
+        return Err(format!(
+            "payload of {len} bytes exceeds the {MAX_PAYLOAD}-byte limit"
+        ));
+    }
+    let payload = header.take(len as usize)?;
+    let crc = header.u32()?;
+    if crc != crc32fast::hash(payload) {
+        return Err("checksum mismatch: the file is corrupt".into());
+    }
+    if header.pos != bytes.len() {
+        return Err(format!(
+            "{} unexpected bytes after the checksum",
+            bytes.len() - header.pos
+        ));
+    }
+    let mut r = Reader {
+        bytes: payload,
+        pos: 0,
+    };
+    let method = match r.u8()? {
+        0 => Method::Lpca,
+        1 => Method::PcaBtf,
+        2 => Method::PcaRf,
+        m => return Err(format!("unknown method code {m}")),
+    };
+    let width = r.u32()?;
+    let height = r.u32()?;
+    if !(1..=MAX_SIDE).contains(&width) || !(1..=MAX_SIDE).contains(&height) {
+        return Err(format!(
+            "size {width}x{height} outside 1..={MAX_SIDE} texels a side"
+        ));
+    }
+    let components = usize::from(r.u16()?);
+    let views = r.directions("view directions")?;
+    let lights = r.directions("light directions")?;
+    let (w, h) = (width as usize, height as usize);
+    let (count, items, dim) = shape(method, w, h, views.len(), lights.len());
+    if components == 0 || components > dim {
+        return Err(format!(
+            "{components} components for vectors of {dim} values"
+        ));
+    }
+    let mut parts = Vec::with_capacity(count.min(u16::MAX as usize));
+    for part in 0..count {
+        let what = |s: &str| format!("part {part}: {s}");
+        let clusters = usize::from(r.u16()?);
+        if clusters == 0 || clusters > items || (method != Method::Lpca && clusters != 1) {
+            return Err(what(&format!(
+                "{clusters} clusters for {items} vectors ({} method)",
+                method.name()
+            )));
+        }
+        let means = r.halves(clusters.saturating_mul(dim), &what("cluster means"))?;
+        let bases = r.halves(
+            clusters.saturating_mul(components).saturating_mul(dim),
+            &what("eigenvectors"),
+        )?;
+        let assignment = if clusters > 1 {
+            r.ensure(items, 2, &what("cluster indices"))?;
+            let raw = r.take(items * 2)?;
+            let a: Vec<u16> = raw
+                .chunks_exact(2)
+                .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                .collect();
+            if let Some(bad) = a.iter().find(|&&k| usize::from(k) >= clusters) {
+                return Err(what(&format!("cluster index {bad} of {clusters} clusters")));
+            }
+            a
+        } else {
+            vec![0; items]
+        };
+        let weights = r.halves(items.saturating_mul(components), &what("weights"))?;
+        parts.push(Factorization {
+            dim,
+            components,
+            means,
+            bases,
+            assignment,
+            weights,
+        });
+    }
+    if r.pos != payload.len() {
+        return Err(format!(
+            "{} unexpected bytes at the end of the payload",
+            payload.len() - r.pos
+        ));
+    }
+    Ok(LpcaModel::from_parts(method, views, lights, w, h, parts))
+}
+
+/// Writes a model file atomically (a temporary name, then a rename).
+///
+/// # Errors
+/// The destination cannot be written.
+pub fn write(model: &LpcaModel, path: &Path) -> Result<()> {
+    let bytes = to_bytes(model);
+    if bytes.len() - 16 > MAX_PAYLOAD as usize {
+        return Err(LpcaError::Format {
+            path: path.to_path_buf(),
+            reason: format!(
+                "the model needs {} bytes, above the format's {MAX_PAYLOAD}-byte limit",
+                bytes.len()
+            ),
+        });
+    }
+    Ok(io::write_file_atomic(path, &bytes)?)
+}
+
+/// Reads a model file (at most [`MAX_PAYLOAD`] + 16 bytes are read).
+///
+/// # Errors
+/// The file cannot be read, or is not a valid model.
+pub fn read(path: &Path) -> Result<LpcaModel> {
+    use std::io::Read;
+    let io_error = |e| LpcaError::Btf(crate::btf::BtfError::io(path, e));
+    let file = std::fs::File::open(path).map_err(io_error)?;
+    let mut bytes = Vec::new();
+    file.take(u64::from(MAX_PAYLOAD) + 17)
+        .read_to_end(&mut bytes)
+        .map_err(io_error)?;
+    from_bytes(&bytes, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::btf::Btf;
+    use crate::btf::synthetic::SyntheticMaterial;
+    use crate::lpca::LpcaOptions;
+    use crate::progress::NoProgress;
+    use std::sync::OnceLock;
+
+    /// One small fitted model per method (16 x 16 knit), fitted once.
+    fn models() -> &'static Vec<LpcaModel> {
+        static MODELS: OnceLock<Vec<LpcaModel>> = OnceLock::new();
+        MODELS.get_or_init(|| {
+            let btf = Btf::synthetic(SyntheticMaterial::Knit, 16, 2).unwrap();
+            [Method::Lpca, Method::PcaBtf, Method::PcaRf]
+                .into_iter()
+                .map(|method| {
+                    let options = LpcaOptions {
+                        method,
+                        clusters: 4,
+                        components: 3,
+                        max_iterations: 3,
+                        evaluate: false,
+                        ..LpcaOptions::default()
+                    };
+                    LpcaModel::fit(&btf, &options, &NoProgress).unwrap().0
+                })
+                .collect()
+        })
+    }
+
+    fn parse_err(bytes: &[u8]) -> String {
+        match from_bytes(bytes, Path::new("m.lpca")) {
+            Err(LpcaError::Format { path, reason }) => {
+                assert_eq!(path, Path::new("m.lpca"));
+                reason
+            }
+            other => panic!("expected a format error, got {other:?}"),
+        }
+    }
+
+    /// A valid file around a changed payload (new length and CRC).
+    fn repack(bytes: &[u8], edit: impl FnOnce(&mut Vec<u8>)) -> Vec<u8> {
+        let mut payload = bytes[12..bytes.len() - 4].to_vec();
+        edit(&mut payload);
+        let mut out = bytes[..8].to_vec();
+        out.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+        out.extend_from_slice(&payload);
+        out.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
+        out
+    }
+
+    #[test]
+    fn every_method_round_trips_exactly() {
+        for model in models() {
+            let bytes = to_bytes(model);
+            let back = from_bytes(&bytes, Path::new("m.lpca")).unwrap();
+            assert_eq!(&back, model, "{:?}", model.method());
+            assert_eq!(to_bytes(&back), bytes);
+            let predicted = payload_len(
+                model.method(),
+                model.width(),
+                model.height(),
+                model.views().len(),
+                model.lights().len(),
+                model.clusters(),
+                model.components(),
+            );
+            assert_eq!(predicted as usize, bytes.len() - 16);
+            assert_eq!(
+                back.reconstruct(40, 7).unwrap(),
+                model.reconstruct(40, 7).unwrap()
+            );
+        }
+    }
+
+    #[test]
+    fn truncated_files_are_errors_at_every_length() {
+        let bytes = to_bytes(&models()[0]);
+        let step = (bytes.len() / 97).max(1);
+        for len in (0..bytes.len()).step_by(step) {
+            parse_err(&bytes[..len]);
+        }
+        // Truncated payload with a matching header length and CRC.
+        let short = repack(&bytes, |p| p.truncate(p.len() - 3));
+        assert!(parse_err(&short).contains("truncated") || parse_err(&short).contains("exceed"));
+    }
+
+    #[test]
+    fn corrupt_files_are_errors() {
+        let bytes = to_bytes(&models()[2]);
+        let mut flipped = bytes.clone();
+        let mid = flipped.len() / 2;
+        flipped[mid] ^= 0x40;
+        assert!(parse_err(&flipped).contains("checksum"));
+        let mut magic = bytes.clone();
+        magic[0] = b'X';
+        assert!(parse_err(&magic).contains("magic"));
+        let mut version = bytes.clone();
+        version[4] = 9;
+        assert!(parse_err(&version).contains("version"));
+        let mut extra = bytes.clone();
+        extra.push(0);
+        assert!(parse_err(&extra).contains("unexpected"));
+        assert!(parse_err(b"").contains("too short"));
+        // A .btfm file is not a .lpca file.
+        assert!(parse_err(b"BTFM\x01\x00\x00\x00").contains("magic"));
+    }
+
+    #[test]
+    fn hostile_counts_are_rejected_before_allocating() {
+        let bytes = to_bytes(&models()[0]);
+        // Payload: method(1) width(4) height(4) components(2) views(2)...
+        let huge_len = {
+            let mut b = bytes.clone();
+            b[8..12].copy_from_slice(&u32::MAX.to_le_bytes());
+            b
+        };
+        assert!(parse_err(&huge_len).contains("limit"));
+        let side = repack(&bytes, |p| p[1..5].copy_from_slice(&u32::MAX.to_le_bytes()));
+        assert!(parse_err(&side).contains("outside"));
+        // 16384 x 16384 texels: a weights array of 2^28 x C halves that the file cannot hold.
+        let big = repack(&bytes, |p| {
+            p[1..5].copy_from_slice(&16384u32.to_le_bytes());
+            p[5..9].copy_from_slice(&16384u32.to_le_bytes());
+        });
+        let reason = parse_err(&big);
+        assert!(
+            reason.contains("exceed the file") || reason.contains("clusters"),
+            "{reason}"
+        );
+        let comps = repack(&bytes, |p| {
+            p[9..11].copy_from_slice(&u16::MAX.to_le_bytes())
+        });
+        assert!(parse_err(&comps).contains("components"));
+        let method = repack(&bytes, |p| p[0] = 7);
+        assert!(parse_err(&method).contains("method"));
+        let views = repack(&bytes, |p| {
+            p[11..13].copy_from_slice(&u16::MAX.to_le_bytes())
+        });
+        parse_err(&views);
+        // A cluster count above the texel count.
+        let offset = 1 + 4 + 4 + 2 + 2 + 81 * 8 + 2 + 81 * 8;
+        let clusters = repack(&bytes, |p| {
+            p[offset..offset + 2].copy_from_slice(&u16::MAX.to_le_bytes())
+        });
+        assert!(parse_err(&clusters).contains("clusters"));
+        // A cluster index out of range.
+        let model = &models()[0];
+        let f = &model.parts()[0];
+        let at = offset + 2 + 2 * (f.means.len() + f.bases.len());
+        let index = repack(&bytes, |p| {
+            p[at..at + 2].copy_from_slice(&100u16.to_le_bytes())
+        });
+        assert!(parse_err(&index).contains("cluster index"));
+        // A NaN half float.
+        let nan = repack(&bytes, |p| {
+            p[offset + 2..offset + 4].copy_from_slice(&f16::NAN.to_bits().to_le_bytes())
+        });
+        assert!(parse_err(&nan).contains("non-finite"));
+    }
+}
