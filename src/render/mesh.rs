@@ -184,10 +184,12 @@ impl Mesh {
     }
 
     /// A unit sphere: `segments` around, `rings` from pole to pole; the texture repeats
-    /// `2 * repeats` times around the equator and `repeats` times pole to pole.
+    /// `2 * repeats` times (rounded to a whole number, so that the seam is seamless) around
+    /// the equator and `repeats` times pole to pole.
     pub fn sphere(segments: u32, rings: u32, repeats: f32) -> Self {
         use std::f32::consts::PI;
-        Self::grid(segments, rings, (2.0 * repeats, repeats), |s, t| {
+        let around = (2.0 * repeats).round().max(1.0);
+        Self::grid(segments, rings, (around, repeats), |s, t| {
             let (st, ct) = (PI * t).sin_cos();
             let (sp, cp) = (2.0 * PI * s).sin_cos();
             let p = [st * cp, ct, -st * sp];
@@ -220,7 +222,8 @@ impl Mesh {
     }
 
     /// A torus around the y axis, radii 1 (ring) and 0.4 (tube); `segments` around the ring,
-    /// `sides` around the tube.
+    /// `sides` around the tube. The texture repeats a whole number of times both ways (about
+    /// `repeats` per unit of length), so both seams are seamless.
     pub fn torus(segments: u32, sides: u32, repeats: f32) -> Self {
         use std::f32::consts::PI;
         let (big, small) = (1.0f32, 0.4f32);
@@ -228,7 +231,10 @@ impl Mesh {
         Self::grid(
             segments,
             sides,
-            (tau * big * repeats / 2.0, tau * small * repeats / 2.0),
+            (
+                (tau * big * repeats / 2.0).round().max(1.0),
+                (tau * small * repeats / 2.0).round().max(1.0),
+            ),
             |s, t| {
                 let (sa, ca) = (tau * s).sin_cos();
                 let (sb, cb) = (tau * t).sin_cos();
@@ -508,6 +514,23 @@ mod tests {
         ] {
             let mesh = kind.build(24, 2.0).unwrap();
             check_frames(&mesh, &kind.to_string());
+        }
+    }
+
+    #[test]
+    fn closed_meshes_wrap_a_whole_number_of_tiles() {
+        for repeats in [0.7f32, 1.0, 2.3] {
+            for mesh in [Mesh::sphere(16, 8, repeats), Mesh::torus(16, 8, repeats)] {
+                let max_u = mesh.vertices.iter().map(|v| v.uv[0]).fold(0.0f32, f32::max);
+                assert!(max_u >= 1.0 && max_u.fract() == 0.0, "{max_u}");
+            }
+            let torus = Mesh::torus(16, 8, repeats);
+            let max_v = torus
+                .vertices
+                .iter()
+                .map(|v| v.uv[1])
+                .fold(0.0f32, f32::max);
+            assert!(max_v >= 1.0 && max_v.fract() == 0.0, "{max_v}");
         }
     }
 

@@ -158,21 +158,38 @@ pub struct GpuMaterial {
     pub has_relief: bool,
 }
 
-fn rgba_f16(planes: &[&Array3<f32>]) -> Vec<u8> {
-    let mut out = Vec::new();
-    for p in planes {
-        let (_, h, w) = p.dim();
-        out.reserve(h * w * 8);
-        for y in 0..h {
-            for x in 0..w {
-                for c in 0..4 {
-                    let v = if c < 3 { p[[c, y, x]] } else { 1.0 };
-                    out.extend_from_slice(&f16::from_f32(v).to_le_bytes());
-                }
+/// Mip levels of a `side` x `side` texture (down to 1 x 1).
+pub fn mip_levels(side: usize) -> u32 {
+    usize::BITS - side.max(1).leading_zeros()
+}
+
+/// One layer's texels and its mip chain (2 x 2 box filter; odd sides clamp), as RGBA f16
+/// bytes, finest level first, appended to `out`.
+fn push_mip_chain(out: &mut Vec<u8>, side: usize, texel: impl Fn(usize, usize) -> [f32; 4]) {
+    let mut level: Vec<[f32; 4]> = (0..side * side)
+        .map(|i| texel(i / side, i % side))
+        .collect();
+    let mut n = side;
+    for l in 0..mip_levels(side) {
+        if l > 0 {
+            let m = (n / 2).max(1);
+            let at = |y: usize, x: usize| level[y.min(n - 1) * n + x.min(n - 1)];
+            let next: Vec<[f32; 4]> = (0..m * m)
+                .map(|i| {
+                    let (y, x) = (2 * (i / m), 2 * (i % m));
+                    let q = [at(y, x), at(y, x + 1), at(y + 1, x), at(y + 1, x + 1)];
+                    std::array::from_fn(|c| 0.25 * (q[0][c] + q[1][c] + q[2][c] + q[3][c]))
+                })
+                .collect();
+            level = next;
+            n = m;
+        }
+        for t in &level {
+            for v in t {
+                out.extend_from_slice(&f16::from_f32(*v).to_le_bytes());
             }
         }
     }
-    out
 }
 
 impl GpuMaterial {
@@ -222,7 +239,7 @@ impl GpuMaterial {
                 &wgpu::TextureDescriptor {
                     label: Some(label),
                     size: extent(layers),
-                    mip_level_count: 1,
+                    mip_level_count: mip_levels(size),
                     sample_count: 1,
                     dimension: wgpu::TextureDimension::D2,
                     format: wgpu::TextureFormat::Rgba16Float,
@@ -233,31 +250,29 @@ impl GpuMaterial {
                 data,
             )
         };
+        let mut sub_data = Vec::new();
+        for p in &planes {
+            push_mip_chain(&mut sub_data, size, |y, x| {
+                [p[[0, y, x]], p[[1, y, x]], p[[2, y, x]], 1.0]
+            });
+        }
         let subspaces = ctx.checked("subspace textures", || {
-            texture("subspaces", planes.len(), &rgba_f16(&planes))
+            texture("subspaces", planes.len(), &sub_data)
         })?;
         let has_relief = cache.normals().is_some();
-        let relief_data = match cache.normals() {
+        // Mip levels average the normals without renormalising them: far away, the shading
+        // max(0, n . l) then tends to the mean over the footprint, as it should.
+        let mut relief_data = Vec::new();
+        match cache.normals() {
             Some(n) => {
                 let mean = heights.map_or(0.0, |h| h.mean().unwrap_or(0.0));
-                let relief =
-                    Array3::from_shape_fn((3, size, size), |(c, y, x)| n[[c, y, x]] as f32);
-                let mut bytes = Vec::with_capacity(size * size * 8);
-                for y in 0..size {
-                    for x in 0..size {
-                        let h = heights.map_or(0.0, |h| h[[y, x]] - mean) as f32;
-                        for v in [relief[[0, y, x]], relief[[1, y, x]], relief[[2, y, x]], h] {
-                            bytes.extend_from_slice(&f16::from_f32(v).to_le_bytes());
-                        }
-                    }
-                }
-                bytes
+                push_mip_chain(&mut relief_data, size, |y, x| {
+                    let h = heights.map_or(0.0, |h| h[[y, x]] - mean);
+                    [n[[0, y, x]], n[[1, y, x]], n[[2, y, x]], h].map(|v| v as f32)
+                });
             }
-            None => {
-                let flat = [0.0f32, 0.0, 1.0, 0.0].map(|v| f16::from_f32(v).to_le_bytes());
-                flat.concat().repeat(size * size)
-            }
-        };
+            None => push_mip_chain(&mut relief_data, size, |_, _| [0.0, 0.0, 1.0, 0.0]),
+        }
         let relief = ctx.checked("relief texture", || texture("relief", 1, &relief_data))?;
         let storage = |label, bytes: &[u8]| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -289,6 +304,7 @@ impl GpuMaterial {
             address_mode_v: wgpu::AddressMode::Repeat,
             mag_filter: wgpu::FilterMode::Linear,
             min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
         let sub_view = subspaces.create_view(&wgpu::TextureViewDescriptor {

@@ -145,7 +145,7 @@ pub fn plan_scene(
         }
     }
     // The nearest power of two on a log scale: texels at most sqrt(2) larger or smaller than
-    // pixels (linear filtering covers that; no mipmaps are needed).
+    // pixels (trilinear filtering covers that).
     let wanted = 1usize << (texels_per_uv.max(1.0).log2().round() as u32).min(30);
     ScenePlan {
         clusters: clusters.into_iter().collect(),
