@@ -46,14 +46,26 @@ fn demo_writes_the_report_with_its_images_models_and_benchmark() {
         }
     }
     // The enlargement is seamless-sized (a multiple of the pyramid step) and at least as large
-    // as asked; the comparison holds 3 lights x (measured + 3 models).
+    // as asked; the comparison holds 3 lights x (measured + 3 models + LPCA).
     let big = image::open(out.join("enlarged-2dcar-96x96.png")).unwrap();
     assert_eq!((big.width(), big.height()), (96, 96));
     let sheet = image::open(out.join("comparison.png")).unwrap();
-    assert_eq!(sheet.width(), 4 * 64 + 3 * 6);
+    assert_eq!(
+        sheet.width(),
+        5 * 64 + 4 * 6,
+        "measured, 3 MRF models, LPCA"
+    );
     assert_eq!(sheet.height(), 3 * 64 + 2 * 6);
-    for model in ["gmrf", "2dcar", "3dcar"] {
-        let m = out.join("models").join(format!("{model}.btfm"));
+    for model in [
+        "gmrf.btfm",
+        "2dcar.btfm",
+        "3dcar.btfm",
+        "lpca.lpca",
+        "pca-btf.lpca",
+        "pca-rf.lpca",
+    ] {
+        let m = out.join("models").join(model);
+        let model = model.split('.').next().unwrap();
         assert!(std::fs::metadata(&m).unwrap().len() > 100, "{model}");
         assert!(md.contains(&format!("| {model} |")), "table row {model}");
     }

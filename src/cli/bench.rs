@@ -3,7 +3,8 @@
 use std::path::PathBuf;
 
 use btfmrf::btf::Btf;
-use btfmrf::eval::bench::{self, BenchOptions};
+use btfmrf::eval::bench::{self, Baseline, BenchOptions};
+use btfmrf::lpca::Method;
 
 use super::{Bar, Global, emit};
 
@@ -33,6 +34,18 @@ pub struct Args {
     /// Measured (view, light) pairs over which fidelity is averaged.
     #[arg(long, default_value_t = 8)]
     fidelity_pairs: usize,
+    /// Local-PCA settings to run, each CLUSTERSxCOMPONENTS (repeat the option for several).
+    #[arg(long = "lpca", value_name = "KxC", value_parser = parse_kxc, default_values = ["8x4", "32x8"])]
+    lpca: Vec<(usize, usize)>,
+    /// Components of the global PCA of images (PCA BTF); 0 skips it.
+    #[arg(long, default_value_t = 8)]
+    pca_btf: usize,
+    /// Components per view of the per-view PCA (PCA RF); 0 skips it.
+    #[arg(long, default_value_t = 4)]
+    pca_rf: usize,
+    /// Only the MRF models (no pixelwise baselines).
+    #[arg(long)]
+    mrf_only: bool,
     /// Seed of every random step.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -57,6 +70,11 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         synthesis_side: args.synthesis_size,
         fidelity_pairs: args.fidelity_pairs,
         seed: args.seed,
+        baselines: if args.mrf_only {
+            Vec::new()
+        } else {
+            baselines(&args.lpca, args.pca_btf, args.pca_rf)
+        },
     };
     let report = bench::run(
         &btf,
@@ -77,4 +95,41 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         ))?;
     }
     Ok(())
+}
+
+/// The baselines asked for on the command line.
+fn baselines(lpca: &[(usize, usize)], pca_btf: usize, pca_rf: usize) -> Vec<Baseline> {
+    let mut out: Vec<Baseline> = lpca
+        .iter()
+        .map(|&(clusters, components)| Baseline {
+            method: Method::Lpca,
+            clusters,
+            components,
+        })
+        .collect();
+    for (method, components) in [(Method::PcaBtf, pca_btf), (Method::PcaRf, pca_rf)] {
+        if components > 0 {
+            out.push(Baseline {
+                method,
+                clusters: 1,
+                components,
+            });
+        }
+    }
+    out
+}
+
+/// `8x4` as (8, 4).
+fn parse_kxc(s: &str) -> Result<(usize, usize), String> {
+    let (k, c) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected CLUSTERSxCOMPONENTS, e.g. 8x4, not {s:?}"))?;
+    let num = |t: &str| {
+        t.trim()
+            .parse::<usize>()
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(|| format!("{t:?} in {s:?} is not a positive whole number"))
+    };
+    Ok((num(k)?, num(c)?))
 }

@@ -7,8 +7,9 @@ use anyhow::Context;
 use btfmrf::btf::io::{self, publish_dir, temp_dir_beside};
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction, ImageFormat};
-use btfmrf::eval::bench::{self, BenchOptions};
+use btfmrf::eval::bench::{self, Baseline, BenchOptions};
 use btfmrf::eval::montage::montage;
+use btfmrf::lpca::{LpcaModel, Method};
 use btfmrf::model::{MaterialModel, ModelKind, format};
 use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
 use btfmrf::synthesis::SynthesisOptions;
@@ -34,8 +35,9 @@ pub struct Args {
     /// The built-in material: sponge, knit, stones or leather.
     #[arg(long, default_value = "sponge")]
     material: SyntheticMaterial,
-    /// Measured tile size in texels.
-    #[arg(long, default_value_t = 128)]
+    /// Measured tile size in texels (128 takes several minutes: local PCA of 16384 texel
+    /// vectors of 19683 values).
+    #[arg(long, default_value_t = 64)]
     size: u32,
     /// Side of the seamless enlargement, pixels.
     #[arg(long, default_value_t = 2048)]
@@ -76,8 +78,13 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     io::write_image(&dir.join("measured.png"), &measured_sheet(&btf)?)?;
 
     step(2, "fitting and measuring every method");
+    // One local-PCA size keeps the demo short; `btfmrf bench` runs more.
     let options = BenchOptions {
         seed: args.seed,
+        baselines: Baseline::defaults()
+            .into_iter()
+            .filter(|b| b.method != Method::Lpca || b.clusters == 8)
+            .collect(),
         ..BenchOptions::default()
     };
     let run = bench::run(
@@ -88,6 +95,10 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     )?;
     let plots = run.report.write(&dir.join("bench"))?;
     std::fs::create_dir(dir.join("models")).context("creating models/")?;
+    for model in &run.baseline_models {
+        let name = format!("{}.lpca", model.method().name());
+        io::write_file_atomic(&dir.join("models").join(name), &model.to_bytes())?;
+    }
     for model in &run.mrf_models {
         format::write(
             model,
@@ -101,7 +112,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let enlarged = enlargement(car2d, args.enlarge, args.seed)?;
     let enlarged_file = format!("enlarged-2dcar-{0}x{0}.png", enlarged.dim().1);
     io::write_image(&dir.join(&enlarged_file), &enlarged)?;
-    let comparison = comparison(&btf, &run.mrf_models, args.seed)?;
+    let lpca = run.baseline_models.first();
+    let comparison = comparison(&btf, &run.mrf_models, lpca, args.seed)?;
     io::write_image(&dir.join("comparison.png"), &comparison)?;
 
     step(4, "rendering objects (wgpu)");
@@ -233,8 +245,13 @@ fn measured_sheet(btf: &Btf) -> anyhow::Result<Array3<f32>> {
 
 /// Rows: the comparison lights; columns: the measured image tiled 2 x 2 (the built-in
 /// materials are periodic), then each MRF model's synthesis at twice the measured size, so
-/// that all panels show the surface at one scale.
-fn comparison(btf: &Btf, models: &[MaterialModel], seed: u64) -> anyhow::Result<Array3<f32>> {
+/// that all panels show the surface at one scale, then the local-PCA reconstruction (tiled).
+fn comparison(
+    btf: &Btf,
+    models: &[MaterialModel],
+    lpca: Option<&LpcaModel>,
+    seed: u64,
+) -> anyhow::Result<Array3<f32>> {
     let (h, w) = (btf.height() as usize, btf.width() as usize);
     let o = SynthesisOptions {
         rows: 2 * h,
@@ -260,6 +277,9 @@ fn comparison(btf: &Btf, models: &[MaterialModel], seed: u64) -> anyhow::Result<
         for (m, cache) in models.iter().zip(&caches) {
             row.push(m.image_from_cache(cache, &view, &light)?);
         }
+        if let Some(lpca) = lpca {
+            row.push(bench::tile(&lpca.reconstruct(v, l)?, 2 * h, 2 * w));
+        }
         rows.push(row);
     }
     let rows: Vec<Vec<&Array3<f32>>> = rows.iter().map(|r| r.iter().collect()).collect();
@@ -277,7 +297,7 @@ fn report(
         "# btfmrf demo: {material}\n\n\
          A procedural `{material}` material, rendered for all 81 x 81 Bonn view/light pairs at \
          {size}x{size} texels (`material.zip`, UBO2003 layout), analysed into three MRF models \
-         (`models/`), and synthesized back. Seed {seed}; the whole run took {secs:.0} s on this \
+         and three PCA baselines (`models/`), and synthesized back. Seed {seed}; the whole run took {secs:.0} s on this \
          machine.\n\n\
          ## The measured material\n\n\
          Rows: views at theta 0, 45 and 75 degrees (phi 0); columns: lights (theta, phi) = \
@@ -285,9 +305,10 @@ fn report(
          ![measured](measured.png)\n\n\
          ## Measured against synthesized\n\n\
          Frontal view; rows: lights (theta, phi) = {lights:?}; columns: the measured image \
-         (tiled 2 x 2), then GMRF, 2D CAR and 3D CAR syntheses at twice the measured size. \
-         The MRF models reproduce colour and second-order statistics, not the shapes of \
-         large structures.\n\n\
+         (tiled 2 x 2), then GMRF, 2D CAR and 3D CAR syntheses at twice the measured size, and \
+         the local-PCA reconstruction (8 clusters x 4 components, tiled). The MRF models \
+         reproduce colour and second-order statistics, not the shapes of large structures; \
+         LPCA reproduces the measured pixels but cannot make new texture.\n\n\
          ![comparison](comparison.png)\n\n\
          ## Seamless enlargement\n\n\
          2D CAR, {side}x{side}, tileable, frontal view, light at (45, 90): \

@@ -19,6 +19,7 @@ use crate::btf::io::{publish_dir, temp_dir_beside, write_file_atomic};
 use crate::btf::{Btf, Direction};
 use crate::eval::plot::benchmark_plots;
 use crate::eval::texture_fidelity;
+use crate::lpca::{LpcaModel, LpcaOptions, Method};
 use crate::model::{MaterialModel, ModelKind, format};
 use crate::progress::Progress;
 use crate::synthesis::SynthesisOptions;
@@ -36,6 +37,36 @@ pub struct BenchOptions {
     pub fidelity_pairs: usize,
     /// Seed of every random step.
     pub seed: u64,
+    /// The pixelwise baselines: (method, clusters, components) each.
+    pub baselines: Vec<Baseline>,
+}
+
+/// One pixelwise baseline of the benchmark: a PCA factorization and its size.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Baseline {
+    /// Local PCA, global PCA of images, or per-view PCA.
+    pub method: Method,
+    /// Clusters (local PCA only; the others use one).
+    pub clusters: usize,
+    /// Principal components per cluster (per view for PCA RF).
+    pub components: usize,
+}
+
+impl Baseline {
+    /// The baselines the issue asks for: LPCA at two sizes, PCA BTF and PCA RF.
+    pub fn defaults() -> Vec<Baseline> {
+        let b = |method, clusters, components| Baseline {
+            method,
+            clusters,
+            components,
+        };
+        vec![
+            b(Method::Lpca, 8, 4),
+            b(Method::Lpca, 32, 8),
+            b(Method::PcaBtf, 1, 8),
+            b(Method::PcaRf, 1, 4),
+        ]
+    }
 }
 
 impl Default for BenchOptions {
@@ -45,6 +76,7 @@ impl Default for BenchOptions {
             synthesis_side: 1024,
             fidelity_pairs: 8,
             seed: 1,
+            baselines: Baseline::defaults(),
         }
     }
 }
@@ -171,6 +203,58 @@ fn pair_directions(btf: &Btf, view: usize, light: usize) -> (Direction, Directio
         btf.views().iter().as_slice()[view],
         btf.lights().iter().as_slice()[light],
     )
+}
+
+/// Runs one pixelwise baseline (fit, file size, timed reconstruction tiled to the synthesis
+/// size, ΔE over all images, fidelity).
+///
+/// # Errors
+/// Fitting or reconstruction failed.
+pub fn bench_baseline(
+    btf: &Btf,
+    baseline: &Baseline,
+    options: &BenchOptions,
+    progress: &dyn Progress,
+) -> Result<(MethodResult, LpcaModel)> {
+    let fit_options = LpcaOptions {
+        method: baseline.method,
+        clusters: baseline.clusters,
+        components: baseline.components,
+        seed: options.seed,
+        evaluate: true,
+        ..LpcaOptions::default()
+    };
+    let (model, report) = LpcaModel::fit(btf, &fit_options, progress)?;
+    let model_bytes = model.to_bytes().len() as u64;
+    let side = options.synthesis_side;
+    let start = Instant::now();
+    tile(&model.reconstruct(0, 0)?, side, side);
+    let synthesis_seconds = start.elapsed().as_secs_f64();
+    let pairs = fidelity_pairs(btf, options.fidelity_pairs);
+    let fidelity = mean_fidelity(btf, &pairs, |v, l| Ok(model.reconstruct(v, l)?))?;
+    let parameters = match baseline.method {
+        Method::Lpca => serde_json::json!({
+            "clusters": baseline.clusters,
+            "components": baseline.components,
+        }),
+        _ => serde_json::json!({ "components": baseline.components }),
+    };
+    let result = MethodResult {
+        name: baseline.method.name().to_string(),
+        parameters,
+        analysis_seconds: report.load_seconds + report.fit_seconds,
+        synthesis_seconds,
+        model_bytes,
+        compression_ratio: btf.raw_bytes() as f64 / model_bytes as f64,
+        mean_delta_e: Some(report.mean_delta_e).filter(|e| e.is_finite()),
+        fidelity,
+        note: format!(
+            "one {}x{} image reconstructed, tiled to {side}x{side} (cannot enlarge)",
+            btf.width(),
+            btf.height()
+        ),
+    };
+    Ok((result, model))
 }
 
 /// Tiles an image periodically to `rows` x `cols` (how a method that cannot enlarge covers a
@@ -321,6 +405,8 @@ pub struct BenchRun {
     pub report: BenchReport,
     /// The MRF models, in the order of [`ModelKind::ALL`].
     pub mrf_models: Vec<MaterialModel>,
+    /// The baselines' models, in the order of [`BenchOptions::baselines`].
+    pub baseline_models: Vec<LpcaModel>,
 }
 
 /// Runs every method this build knows on `btf` and gathers the report. `input` names the BTF
@@ -341,6 +427,12 @@ pub fn run(
         methods.push(result);
         mrf_models.push(model);
     }
+    let mut baseline_models = Vec::new();
+    for baseline in &options.baselines {
+        let (result, model) = bench_baseline(btf, baseline, options, progress)?;
+        methods.push(result);
+        baseline_models.push(model);
+    }
     let report = BenchReport {
         input: input.to_string(),
         shape: [
@@ -353,7 +445,11 @@ pub fn run(
         fidelity_pairs: fidelity_pairs(btf, options.fidelity_pairs).len(),
         methods,
     };
-    Ok(BenchRun { report, mrf_models })
+    Ok(BenchRun {
+        report,
+        mrf_models,
+        baseline_models,
+    })
 }
 
 impl BenchReport {

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use crate::btf::BtfError;
+use crate::lpca::LpcaError;
 use crate::model::ModelError;
 
 /// Result alias for the evaluation area.
@@ -18,6 +19,9 @@ pub enum EvalError {
     /// Analysing or synthesizing a model failed.
     #[error(transparent)]
     Model(#[from] ModelError),
+    /// Fitting or reconstructing a PCA baseline failed.
+    #[error(transparent)]
+    Lpca(#[from] LpcaError),
     /// Drawing a plot failed.
     #[error("{}: cannot draw the plot: {reason}", path.display())]
     Plot {
