@@ -288,7 +288,7 @@ impl BenchReport {
              (8-bit RGB).\n\nΔE: mean CIE76 ΔE over all measured images (only for methods that \
              reproduce pixels). Fidelity: mean texture-fidelity score against the measured \
              images at {} fixed (view, light) pairs (0 = identical statistics; lower is \
-             better). Synthesis: one image of the stated size.\n\n",
+             better). Synthesis: see the notes under the table.\n\n",
             self.input,
             human(self.raw_bytes),
             self.fidelity_pairs,
@@ -310,6 +310,16 @@ impl BenchReport {
                     .map_or("-".to_string(), |e| format!("{e:.2}")),
                 m.fidelity,
             ));
+        }
+        md.push('\n');
+        let mut notes: Vec<(&str, &str)> = Vec::new();
+        for m in &self.methods {
+            if !notes.contains(&(m.name.as_str(), m.note.as_str())) {
+                notes.push((&m.name, &m.note));
+            }
+        }
+        for (name, note) in notes {
+            md.push_str(&format!("Synthesis of {name}: {note}.  \n"));
         }
         md.push('\n');
         for line in self.verdicts() {

@@ -61,6 +61,7 @@ pub fn scatter(
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 24))
             .margin(20)
+            .margin_right(40)
             .x_label_area_size(50)
             .y_label_area_size(70)
             .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
@@ -71,15 +72,18 @@ pub fn scatter(
             .y_desc(y_desc)
             .label_style(("sans-serif", 15))
             .y_labels(8)
+            .x_label_formatter(&|x| tick(*x))
             .light_line_style(RGBColor(238, 238, 238))
             .draw()
             .map_err(|e| fail(e.to_string()))?;
         chart
-            .draw_series(points.iter().map(|p| {
+            .draw_series(points.iter().enumerate().map(|(i, p)| {
                 let colour = Palette99::pick(p.group).to_rgba();
+                // Staggered labels, so that close points stay readable.
+                let dy = -22 + 15 * (i % 3) as i32;
                 EmptyElement::at((p.x, p.y))
                     + Circle::new((0, 0), 6, colour.filled())
-                    + Text::new(p.label.clone(), (9, -9), ("sans-serif", 15))
+                    + Text::new(p.label.clone(), (9, dy), ("sans-serif", 15))
             }))
             .map_err(|e| fail(e.to_string()))?;
         root.present().map_err(|e| fail(e.to_string()))?;
@@ -156,7 +160,11 @@ fn label(m: &MethodResult) -> String {
         .map(|o| {
             o.iter()
                 .filter(|(k, _)| k.as_str() != "levels")
-                .map(|(k, v)| format!("{}={v}", k.chars().next().unwrap_or('?')))
+                .map(|(k, v)| match k.as_str() {
+                    "clusters" => format!("K={v}"),
+                    "components" => format!("C={v}"),
+                    _ => format!("{k}={v}"),
+                })
                 .collect()
         })
         .unwrap_or_default();
@@ -184,6 +192,15 @@ fn span(values: impl Iterator<Item = f64>) -> (f64, f64) {
     });
     let pad = ((hi - lo) * 0.15).max(hi.abs().max(1.0) * 0.05);
     (lo - pad, hi + pad)
+}
+
+/// A log-axis tick without needless decimals (1000, 10, 0.1, 0.01).
+fn tick(x: f64) -> String {
+    if x >= 1.0 {
+        format!("{x:.0}")
+    } else {
+        format!("{x}")
+    }
 }
 
 /// The enclosing powers of ten of positive values (at least one decade), so that a log axis
