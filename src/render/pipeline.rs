@@ -2,8 +2,10 @@
 //!
 //! Every pipeline shares one bind group layout (see `shaders/common.wgsl`): the uniforms, the
 //! subspace-image texture array, the relief texture (normals + heights), a repeating sampler
-//! and the lookup tables of [`super::lut`]. A new pipeline (LPCA decoding) is a shader file
-//! plus one arm in [`shader_source`] and [`Mapping`]; it may add its own bind group.
+//! and the lookup tables of [`super::lut`]. A new pipeline is a shader file plus one arm in
+//! [`shader_source`] and [`Mapping`]; it may use its own bind group layout, as LPCA decoding
+//! ([`Mapping::Lpca`], [`super::lpca`]) does: the uniforms and direction tables at the same
+//! bindings, its model buffers at 10..13.
 
 use std::collections::HashMap;
 
