@@ -139,8 +139,10 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
         width,
         height,
     };
+    let mut method = None;
     let out = if is_lpca {
         let model = lpca::format::read(&args.model)?;
+        method = Some(model.method().name());
         Renderer::new()?.render_lpca(&model, &mesh, &scene)?
     } else {
         let model = format::read(&args.model)?;
@@ -164,6 +166,7 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
             "adapter": out.adapter,
             "mesh": args.mesh.to_string(),
             "mapping": mapping.name(),
+            "method": method,
             "width": width,
             "height": height,
             "texture_size": out.plan.texture_size,
@@ -174,9 +177,9 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
             "synthesis_seconds": out.synthesis_seconds,
             "render_seconds": out.render_seconds,
         }))
-    } else if is_lpca {
+    } else if let Some(method) = method {
         emit(format!(
-            "wrote {} ({}x{}, lpca decoded per fragment on {}: {} clusters, a tile {} texels wide; rendered in {:.3} s)",
+            "wrote {} ({}x{}, {method} model decoded per fragment on {}: {} cluster(s), a tile {} texels wide; rendered in {:.3} s)",
             args.out.display(),
             width,
             height,
