@@ -29,12 +29,13 @@ fn demo_writes_the_report_with_its_images_models_and_benchmark() {
         .skip(1)
         .filter_map(|rest| rest.split(')').next())
         .collect();
-    assert!(links.len() >= 4 + 12, "{links:?}");
+    assert!(links.len() >= 4 + 15, "{links:?}");
     let renders = links.iter().filter(|l| l.starts_with("renders/")).count();
     assert_eq!(
-        renders, 12,
-        "sphere and cloth x bump and displacement x 3 lights"
+        renders, 15,
+        "sphere and cloth x bump and displacement x 3 lights, and the LPCA sphere x 3 lights"
     );
+    assert!(md.contains("| sphere | lpca |"), "{md}");
     for link in &links {
         let path = out.join(link);
         assert!(path.exists(), "{link} is linked but missing");

@@ -9,8 +9,11 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use btfmrf::btf::{Direction, io};
+use btfmrf::btf::synthetic::SyntheticMaterial;
+use btfmrf::btf::{Btf, Direction, io};
+use btfmrf::lpca::{self, LpcaModel, LpcaOptions, Method};
 use btfmrf::model::{MaterialModel, format};
+use btfmrf::progress::NoProgress;
 use btfmrf::render::headless::ModelRenderOptions;
 use btfmrf::render::pipeline::shader_source;
 use btfmrf::render::scene::Projection;
@@ -451,5 +454,145 @@ fn without_an_adapter_the_error_says_what_to_install() {
     assert!(stderr.contains("no GPU adapter found"), "{stderr}");
     assert!(stderr.contains("mesa-vulkan-drivers"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!out.exists());
+}
+
+/// An LPCA model (4 clusters, 3 components) of a small synthetic knit.
+fn lpca_model(method: Method) -> LpcaModel {
+    let btf = Btf::synthetic(SyntheticMaterial::Knit, 16, 1).unwrap();
+    let options = LpcaOptions {
+        method,
+        clusters: 4,
+        components: 3,
+        evaluate: false,
+        ..LpcaOptions::default()
+    };
+    LpcaModel::fit(&btf, &options, &NoProgress).unwrap().0
+}
+
+#[test]
+fn lpca_gpu_decoding_equals_the_cpu_reconstruction_on_a_flat_plane() {
+    let Some(renderer) = renderer() else { return };
+    let side = 64usize;
+    let mesh = Mesh::plane(4, 1.0);
+    for method in [Method::Lpca, Method::PcaRf] {
+        let model = lpca_model(method);
+        let (w, h) = (model.width(), model.height());
+        let view = model
+            .views()
+            .find(&Direction::new(0.0, 0.0), 0.5)
+            .expect("a measured view at the zenith");
+        // Measured lights, and an unmeasured one (3 nearest interpolated).
+        let lights: Vec<Direction> = [3usize, 40, 70]
+            .iter()
+            .map(|&l| *model.lights().get(l).unwrap())
+            .chain([Direction::new(37.0, 100.0)])
+            .collect();
+        for (i, light) in lights.into_iter().enumerate() {
+            let scene = flat_scene(side as u32, light);
+            let gpu = renderer.render_lpca(&model, &mesh, &scene).unwrap();
+            let texels = match model.lights().find(&light, 1e-6) {
+                Some(l) => model.reconstruct(view, l).unwrap(),
+                None => model
+                    .reconstruct_direction(&Direction::new(0.0, 0.0), &light)
+                    .unwrap(),
+            };
+            // Pixel (row, col) shows texel (row * h / side, col * w / side).
+            let cpu = Array3::from_shape_fn((3, side, side), |(c, y, x)| {
+                texels[[c, y * h / side, x * w / side]]
+            });
+            let err = (&gpu.image - &cpu).mapv(f32::abs);
+            let scale = cpu.iter().fold(0.0f32, |m, &x| m.max(x.abs())).max(1e-3);
+            let max = err.iter().fold(0.0f32, |m, &x| m.max(x));
+            let mean = err.mean().unwrap();
+            eprintln!(
+                "{} light {light:?}: max |gpu - cpu| = {max:.2e} ({:.4}% of the peak {scale:.3}), mean {mean:.2e}",
+                method.name(),
+                100.0 * max / scale
+            );
+            if max > 2e-3 * scale || mean > 2e-4 * scale {
+                let path = write_diff(&format!("lpca-plane-{i}"), &gpu.image, &cpu);
+                panic!(
+                    "GPU and CPU LPCA differ for light {light:?}: max {max}, mean {mean} (peak {scale}); diff {}",
+                    path.display()
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_pca_btf_model_is_refused_with_a_clear_error() {
+    let Some(renderer) = renderer() else { return };
+    let model = lpca_model(Method::PcaBtf);
+    let e = renderer
+        .render_lpca(
+            &model,
+            &Mesh::plane(4, 1.0),
+            &flat_scene(32, Direction::new(45.0, 0.0)),
+        )
+        .unwrap_err();
+    assert!(e.to_string().contains("pca-btf"), "{e}");
+}
+
+#[test]
+fn the_render_command_renders_an_lpca_sphere() {
+    if renderer().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("knit.lpca");
+    lpca::format::write(&lpca_model(Method::Lpca), &path).unwrap();
+    let model = path.to_str().unwrap();
+    let mut images = Vec::new();
+    for light in ["45,300", "60,120"] {
+        let out = dir.path().join(format!("s-{light}.png"));
+        let stdout = common::ok(&[
+            "render",
+            model,
+            "--mesh",
+            "sphere",
+            "--out",
+            out.to_str().unwrap(),
+            "--size",
+            "96x96",
+            "--light",
+            light,
+            "--json",
+        ]);
+        let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+        assert_eq!(report["mapping"], "lpca", "{report}");
+        let image = io::read_image(&out).unwrap();
+        assert_eq!(image.dim(), (3, 96, 96));
+        let lit = image.iter().filter(|&&x| x > 0.01).count();
+        assert!(lit > image.len() / 10, "{light}: {lit} lit values");
+        images.push(image);
+    }
+    let change = (&images[0] - &images[1]).mapv(f32::abs).mean().unwrap();
+    assert!(
+        change > 0.01,
+        "moving the light changed the image by {change} only"
+    );
+    // A pipeline that does not fit the model is a clear error.
+    let out = dir.path().join("x.png");
+    let e = common::fails(&[
+        "render",
+        model,
+        "--out",
+        out.to_str().unwrap(),
+        "--mapping",
+        "bump",
+    ]);
+    assert!(e.contains("--mapping lpca"), "{e}");
+    let golden = golden_model_path();
+    let e = common::fails(&[
+        "render",
+        golden.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--mapping",
+        "lpca",
+    ]);
+    assert!(e.contains("not an LPCA model"), "{e}");
     assert!(!out.exists());
 }

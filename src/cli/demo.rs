@@ -117,7 +117,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     io::write_image(&dir.join("comparison.png"), &comparison)?;
 
     step(4, "rendering objects (wgpu)");
-    let renders = renders(car2d, dir, &args)?;
+    let lpca_model = lpca.filter(|m| m.method() == Method::Lpca);
+    let renders = renders(car2d, lpca_model, dir, &args)?;
 
     step(5, "writing the report");
     let mut md = report(
@@ -138,9 +139,15 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A sphere and a cloth under three lights with bump and displacement mapping; returns the
-/// report's section (a table of the images, with what each scene needed synthesized).
-fn renders(model: &MaterialModel, dir: &Path, args: &Args) -> anyhow::Result<String> {
+/// A sphere and a cloth under three lights with bump and displacement mapping, and the sphere
+/// with the LPCA model decoded per fragment (when given); returns the report's section (a
+/// table of the images, with what each scene needed synthesized).
+fn renders(
+    model: &MaterialModel,
+    lpca: Option<&LpcaModel>,
+    dir: &Path,
+    args: &Args,
+) -> anyhow::Result<String> {
     let renderer = Renderer::new()?;
     // One tileable cache for every render: each subspace image is synthesized once, when a
     // scene first needs it, at the render size's power of two (at most 1024).
@@ -157,7 +164,8 @@ fn renders(model: &MaterialModel, dir: &Path, args: &Args) -> anyhow::Result<Str
         "## Rendered on objects ({}, textures {side}^2)\n\n\
          The 2D CAR model on a sphere and a draped cloth, camera at (35, 270), point light at \
          distance 4. Only the subspace images the scenes' view/light pairs touch are \
-         synthesized, each once, when a scene first needs it.\n\n\
+         synthesized, each once, when a scene first needs it. The lpca rows decode the LPCA \
+         model per fragment instead (nothing synthesized; the measured tile repeats).\n\n\
          | mesh | mapping | light | image | subspaces used | newly synthesized | synthesis s \
          | render s |\n|---|---|---|---|---:|---:|---:|---:|\n",
         renderer.ctx.describe()
@@ -194,6 +202,29 @@ fn renders(model: &MaterialModel, dir: &Path, args: &Args) -> anyhow::Result<Str
                     r.render_seconds
                 ));
             }
+        }
+    }
+    if let Some(lpca) = lpca {
+        let mesh = MeshKind::Sphere.build(64, 1.0)?;
+        for (theta, phi) in RENDER_LIGHTS {
+            let scene = Scene {
+                camera: Camera::orbit(Direction::new(35.0, 270.0), 4.2),
+                light: Light {
+                    direction: Direction::new(theta, phi),
+                    distance: Some(4.0),
+                },
+                width: args.render_size,
+                height: args.render_size,
+            };
+            let r = renderer.render_lpca(lpca, &mesh, &scene)?;
+            let name = format!("renders/sphere-lpca-light{theta:.0}-{phi:.0}.png");
+            io::write_image(&dir.join(&name), &r.image)?;
+            md.push_str(&format!(
+                "| sphere | lpca | {theta:.0}, {phi:.0} | ![{name}]({name}) | {} clusters, \
+                 decoded | 0 | 0.00 | {:.3} |\n",
+                lpca.clusters(),
+                r.render_seconds
+            ));
         }
     }
     md.push('\n');

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use btfmrf::btf::{Direction, io};
+use btfmrf::lpca;
 use btfmrf::model::format;
 use btfmrf::render::headless::ModelRenderOptions;
 use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
@@ -16,15 +17,18 @@ use super::{Global, emit};
 ///
 /// Only the subspace images the visible surface needs are synthesized, at the texture
 /// resolution its screen footprint asks for (a power of two, at most --max-texture-size).
+/// An LPCA model (.lpca, told by its magic bytes; also pca-rf) is decoded per fragment on
+/// the GPU instead (--mapping lpca, the default for it): nothing is synthesized.
 ///
 /// Examples:
 ///   btfmrf render sponge.btfm --out sphere.png --size 800x800 --mesh sphere --mapping bump
 ///   btfmrf render sponge.btfm --out cloth.png --mesh cloth --mapping displacement --light 60,200
 ///   btfmrf render sponge.btfm --out bunny.png --mesh bunny.obj --view 20,270 --json
+///   btfmrf render sponge.lpca --out lpca.png --mesh sphere --light 60,200
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
-    /// The model file (.btfm).
+    /// The model file (.btfm, or .lpca).
     model: PathBuf,
     /// Output image (.png, .jpg or .exr).
     #[arg(long)]
@@ -35,9 +39,10 @@ pub struct Args {
     /// sphere, plane, cloth, torus, or an OBJ file (with texture coordinates).
     #[arg(long, default_value = "sphere")]
     mesh: MeshKind,
-    /// bump or displacement (plain: one subspace image as a plain texture, for comparison).
-    #[arg(long, default_value = "bump")]
-    mapping: Mapping,
+    /// bump or displacement (plain: one subspace image as a plain texture, for comparison);
+    /// lpca for .lpca models. Default: bump, or lpca for an .lpca model.
+    #[arg(long)]
+    mapping: Option<Mapping>,
     /// Camera direction "theta,phi" in degrees, seen from the object (phi 270 = in front).
     #[arg(long, value_parser = parse_direction, default_value = "30,270")]
     view: Direction,
@@ -97,8 +102,27 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
             btfmrf::render::MAX_RENDER_SIDE
         );
     }
-    let model = format::read(&args.model)?;
-    let detail = args.detail.unwrap_or(match args.mapping {
+    let is_lpca = {
+        use std::io::Read;
+        let mut head = Vec::new();
+        std::fs::File::open(&args.model)
+            .and_then(|f| f.take(8).read_to_end(&mut head))
+            .with_context(|| format!("reading {}", args.model.display()))?;
+        lpca::format::is_lpca(&head)
+    };
+    let mapping = match (is_lpca, args.mapping) {
+        (true, None | Some(Mapping::Lpca)) => Mapping::Lpca,
+        (true, Some(m)) => anyhow::bail!(
+            "invalid --mapping {m}: {} is an LPCA model, which renders with --mapping lpca only",
+            args.model.display()
+        ),
+        (false, Some(Mapping::Lpca)) => anyhow::bail!(
+            "invalid --mapping lpca: {} is not an LPCA model (.lpca)",
+            args.model.display()
+        ),
+        (false, m) => m.unwrap_or(Mapping::Bump),
+    };
+    let detail = args.detail.unwrap_or(match mapping {
         Mapping::Displacement => 384,
         _ => 64,
     });
@@ -115,18 +139,25 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
         width,
         height,
     };
-    let renderer = Renderer::new()?;
-    let out = renderer.render_model(
-        &model,
-        &mesh,
-        &scene,
-        &ModelRenderOptions {
-            mapping: args.mapping,
-            seed: args.seed,
-            texture_size: args.texture_size,
-            max_texture_size: args.max_texture_size.clamp(32, 8192),
-        },
-    )?;
+    let mut method = None;
+    let out = if is_lpca {
+        let model = lpca::format::read(&args.model)?;
+        method = Some(model.method().name());
+        Renderer::new()?.render_lpca(&model, &mesh, &scene)?
+    } else {
+        let model = format::read(&args.model)?;
+        Renderer::new()?.render_model(
+            &model,
+            &mesh,
+            &scene,
+            &ModelRenderOptions {
+                mapping,
+                seed: args.seed,
+                texture_size: args.texture_size,
+                max_texture_size: args.max_texture_size.clamp(32, 8192),
+            },
+        )?
+    };
     io::write_image(&args.out, &out.image)
         .with_context(|| format!("writing {}", args.out.display()))?;
     if args.json {
@@ -134,7 +165,8 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
             "out": args.out,
             "adapter": out.adapter,
             "mesh": args.mesh.to_string(),
-            "mapping": args.mapping.name(),
+            "mapping": mapping.name(),
+            "method": method,
             "width": width,
             "height": height,
             "texture_size": out.plan.texture_size,
@@ -145,13 +177,24 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
             "synthesis_seconds": out.synthesis_seconds,
             "render_seconds": out.render_seconds,
         }))
+    } else if let Some(method) = method {
+        emit(format!(
+            "wrote {} ({}x{}, {method} model decoded per fragment on {}: {} cluster(s), a tile {} texels wide; rendered in {:.3} s)",
+            args.out.display(),
+            width,
+            height,
+            out.adapter,
+            out.plan.clusters.len(),
+            out.plan.texture_size,
+            out.render_seconds
+        ))
     } else {
         emit(format!(
             "wrote {} ({}x{}, {} on {}; {} of {} subspace images synthesized at {}^2 in {:.3} s, rendered in {:.3} s)",
             args.out.display(),
             width,
             height,
-            args.mapping,
+            mapping,
             out.adapter,
             out.subspaces_synthesized,
             out.subspaces_total,

@@ -4,12 +4,14 @@ use std::time::Instant;
 
 use ndarray::Array3;
 
+use super::lpca::GpuLpca;
 use super::lut::DirectionLut;
 use super::mesh::Mesh;
 use super::pipeline::{DEPTH_FORMAT, GpuMaterial, GpuMesh, MaterialTables, Pipelines};
 use super::plan::{ScenePlan, plan_scene};
 use super::scene::Scene;
 use super::{GpuContext, MAX_RENDER_SIDE, Mapping, RenderError, Result};
+use crate::lpca::LpcaModel;
 use crate::model::MaterialModel;
 use crate::synthesis::{SynthesisCache, SynthesisOptions};
 use rayon::prelude::*;
@@ -209,7 +211,75 @@ impl Renderer {
         scene: &Scene,
         mapping: Mapping,
     ) -> Result<Array3<f32>> {
+        if mapping == Mapping::Lpca {
+            return Err(RenderError::Unsupported(
+                "the lpca pipeline renders LPCA models (Renderer::render_lpca)".into(),
+            ));
+        }
         check_size(scene.width, scene.height)?;
+        material.set_frame(&self.ctx, scene, mesh, 0);
+        self.render_frame(scene, |pass| {
+            self.pipelines.draw(pass, mapping, material, mesh)
+        })
+    }
+
+    /// Renders `mesh` with an LPCA model on the GPU to a linear RGB image (black background).
+    ///
+    /// # Errors
+    /// An invalid size or a device error.
+    pub fn render_gpu_lpca(
+        &self,
+        model: &GpuLpca,
+        mesh: &GpuMesh,
+        scene: &Scene,
+    ) -> Result<Array3<f32>> {
+        check_size(scene.width, scene.height)?;
+        model.set_frame(&self.ctx, scene, mesh);
+        self.render_frame(scene, |pass| self.pipelines.draw_lpca(pass, model, mesh))
+    }
+
+    /// The whole LPCA job: uploads `model` (cluster indices, weights, eigen-ABRDFs and the
+    /// direction tables) and renders one frame, every fragment decoding its texel. Nothing is
+    /// synthesized; the plan lists all clusters and the model's width as texture size.
+    ///
+    /// # Errors
+    /// An invalid size, a PCA BTF model, a model beyond the device's limits or a device error.
+    pub fn render_lpca(
+        &self,
+        model: &LpcaModel,
+        mesh: &Mesh,
+        scene: &Scene,
+    ) -> Result<RenderOutput> {
+        check_size(scene.width, scene.height)?;
+        let start = Instant::now();
+        let luts = (
+            DirectionLut::new(model.views())?,
+            DirectionLut::new(model.lights())?,
+        );
+        let gpu = GpuLpca::new(&self.ctx, &self.pipelines, model, &luts)?;
+        let gpu_mesh = GpuMesh::new(&self.ctx, mesh);
+        let image = self.render_gpu_lpca(&gpu, &gpu_mesh, scene)?;
+        Ok(RenderOutput {
+            image,
+            plan: ScenePlan {
+                clusters: (0..model.clusters()).collect(),
+                texture_size: model.width(),
+            },
+            subspaces_total: 0,
+            subspaces_synthesized: 0,
+            texels_synthesized: 0,
+            synthesis_seconds: 0.0,
+            render_seconds: start.elapsed().as_secs_f64(),
+            adapter: self.ctx.describe(),
+        })
+    }
+
+    /// Renders one frame whose uniforms are written already: clears, `draw`s, reads back.
+    fn render_frame(
+        &self,
+        scene: &Scene,
+        draw: impl FnOnce(&mut wgpu::RenderPass<'_>),
+    ) -> Result<Array3<f32>> {
         let device = &self.ctx.device;
         let (w, h) = (scene.width, scene.height);
         let extent = wgpu::Extent3d {
@@ -236,13 +306,10 @@ impl Renderer {
             )
         })?;
         let depth = target(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
-        material.set_frame(&self.ctx, scene, mesh, 0);
         let colour_view = colour.create_view(&Default::default());
         let depth_view = depth.create_view(&Default::default());
         let mut encoder = device.create_command_encoder(&Default::default());
-        encode_frame(&mut encoder, &colour_view, &depth_view, |pass| {
-            self.pipelines.draw(pass, mapping, material, mesh)
-        });
+        encode_frame(&mut encoder, &colour_view, &depth_view, draw);
         self.ctx.queue.submit([encoder.finish()]);
         let data = read_texture(&self.ctx, &colour, 16)?;
         let row_bytes = w as usize * 16;
@@ -273,6 +340,13 @@ impl Renderer {
         options: &ModelRenderOptions,
     ) -> Result<RenderOutput> {
         check_size(scene.width, scene.height)?;
+        if options.mapping == Mapping::Lpca {
+            return Err(RenderError::Unsupported(
+                "--mapping lpca renders .lpca models only; an MRF model (.btfm) renders with \
+                 bump, displacement or plain"
+                    .into(),
+            ));
+        }
         let start = Instant::now();
         let luts = (
             DirectionLut::new(&model.views)?,

@@ -14,6 +14,11 @@
 //! visible surface touches and the texture resolution of its screen footprint, and only those
 //! subspace images are synthesized.
 //!
+//! An LPCA model ([`crate::lpca::LpcaModel`], Müller et al. 2003) renders through its own
+//! pipeline, [`Mapping::Lpca`] ([`lpca`]): every fragment decodes its texel's 3 x 3 nearest
+//! measured (view, light) pairs from the cluster's eigen-ABRDFs and the texel's weights,
+//! with the same direction tables, so nothing is synthesized.
+//!
 //! Layout: [`context`] (device, headless or for a window), [`mesh`] (meshes with tangent
 //! frames, OBJ), [`scene`] (camera and light), [`lut`] (direction and shading lookup tables,
 //! CPU mirrors of the shader), [`plan`], [`pipeline`] (shaders, GPU material resources, one
@@ -21,6 +26,7 @@
 
 pub mod context;
 pub mod headless;
+pub mod lpca;
 pub mod lut;
 pub mod mesh;
 pub mod pipeline;
@@ -74,6 +80,12 @@ pub enum RenderError {
         /// Why it is rejected.
         reason: String,
     },
+    /// An LPCA model could not be read or is not one this renderer decodes.
+    #[error(transparent)]
+    Lpca(#[from] crate::lpca::LpcaError),
+    /// The model and the requested pipeline do not go together.
+    #[error("{0}")]
+    Unsupported(String),
     /// The window system failed.
     #[error("window: {0}")]
     Window(String),
@@ -98,11 +110,19 @@ pub enum Mapping {
     /// One subspace image as a plain texture, no view or light dependence: the baseline cost
     /// of texturing the same mesh (benchmarks).
     Plain,
+    /// An LPCA model ([`crate::lpca::LpcaModel`]) decoded per fragment: cluster mean plus
+    /// weighted eigen-ABRDFs of the 3 x 3 nearest measured (view, light) pairs.
+    Lpca,
 }
 
 impl Mapping {
     /// Every mapping.
-    pub const ALL: [Mapping; 3] = [Mapping::Bump, Mapping::Displacement, Mapping::Plain];
+    pub const ALL: [Mapping; 4] = [
+        Mapping::Bump,
+        Mapping::Displacement,
+        Mapping::Plain,
+        Mapping::Lpca,
+    ];
 
     /// The name on the command line.
     pub fn name(&self) -> &'static str {
@@ -110,6 +130,7 @@ impl Mapping {
             Mapping::Bump => "bump",
             Mapping::Displacement => "displacement",
             Mapping::Plain => "plain",
+            Mapping::Lpca => "lpca",
         }
     }
 }
@@ -121,7 +142,10 @@ impl std::str::FromStr for Mapping {
             .into_iter()
             .find(|m| m.name().eq_ignore_ascii_case(s))
             .ok_or_else(|| {
-                RenderError::parameter("--mapping", format!("'{s}' is not bump or displacement"))
+                RenderError::parameter(
+                    "--mapping",
+                    format!("'{s}' is not bump, displacement, plain or lpca"),
+                )
             })
     }
 }

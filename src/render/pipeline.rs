@@ -2,8 +2,10 @@
 //!
 //! Every pipeline shares one bind group layout (see `shaders/common.wgsl`): the uniforms, the
 //! subspace-image texture array, the relief texture (normals + heights), a repeating sampler
-//! and the lookup tables of [`super::lut`]. A new pipeline (LPCA decoding) is a shader file
-//! plus one arm in [`shader_source`] and [`Mapping`]; it may add its own bind group.
+//! and the lookup tables of [`super::lut`]. A new pipeline is a shader file plus one arm in
+//! [`shader_source`] and [`Mapping`]; it may use its own bind group layout, as LPCA decoding
+//! ([`Mapping::Lpca`], [`super::lpca`]) does: the uniforms and direction tables at the same
+//! bindings, its model buffers at 10..13.
 
 use std::collections::HashMap;
 
@@ -29,6 +31,7 @@ pub fn shader_source(mapping: Mapping) -> String {
         Mapping::Bump => include_str!("../../shaders/bump.wgsl"),
         Mapping::Displacement => include_str!("../../shaders/displacement.wgsl"),
         Mapping::Plain => include_str!("../../shaders/plain.wgsl"),
+        Mapping::Lpca => include_str!("../../shaders/lpca.wgsl"),
     };
     format!("{COMMON}\n{own}")
 }
@@ -384,6 +387,7 @@ impl GpuMaterial {
 #[derive(Debug)]
 pub struct Pipelines {
     layout: wgpu::BindGroupLayout,
+    pub(crate) lpca_layout: wgpu::BindGroupLayout,
     pipelines: HashMap<Mapping, wgpu::RenderPipeline>,
 }
 
@@ -446,8 +450,47 @@ impl Pipelines {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
+        // The LPCA pipeline: the uniforms and direction tables of common.wgsl (bindings 0,
+        // 4..7) and its own model buffers (10..13, see shaders/lpca.wgsl).
+        let storage = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let uniform = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: vf,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let lpca_entries: Vec<_> = [uniform(0), uniform(10)]
+            .into_iter()
+            .chain([4, 5, 6, 7, 11, 12, 13].map(storage))
+            .collect();
+        let lpca_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("lpca model"),
+            entries: &lpca_entries,
+        });
+        let lpca_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("lpca"),
+            bind_group_layouts: &[Some(&lpca_layout)],
+            immediate_size: 0,
+        });
         let mut pipelines = HashMap::new();
         for mapping in Mapping::ALL {
+            let pipeline_layout = match mapping {
+                Mapping::Lpca => &lpca_pipeline_layout,
+                _ => &pipeline_layout,
+            };
             let pipeline = ctx.checked(mapping.name(), || {
                 let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                     label: Some(mapping.name()),
@@ -455,7 +498,7 @@ impl Pipelines {
                 });
                 device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                     label: Some(mapping.name()),
-                    layout: Some(&pipeline_layout),
+                    layout: Some(pipeline_layout),
                     vertex: wgpu::VertexState {
                         module: &module,
                         entry_point: Some("vs_main"),
@@ -492,10 +535,15 @@ impl Pipelines {
             })?;
             pipelines.insert(mapping, pipeline);
         }
-        Ok(Self { layout, pipelines })
+        Ok(Self {
+            layout,
+            lpca_layout,
+            pipelines,
+        })
     }
 
-    /// Records one draw of `mesh` with `material` into `pass`.
+    /// Records one draw of `mesh` with `material` into `pass` (an MRF mapping; the LPCA
+    /// pipeline draws with [`Pipelines::draw_lpca`], and is ignored here).
     pub fn draw(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
@@ -503,8 +551,31 @@ impl Pipelines {
         material: &GpuMaterial,
         mesh: &GpuMesh,
     ) {
+        if mapping == Mapping::Lpca {
+            return;
+        }
+        self.draw_with(pass, mapping, &material.bind_group, mesh);
+    }
+
+    /// Records one draw of `mesh` with an LPCA model into `pass`.
+    pub fn draw_lpca(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        model: &super::lpca::GpuLpca,
+        mesh: &GpuMesh,
+    ) {
+        self.draw_with(pass, Mapping::Lpca, &model.bind_group, mesh);
+    }
+
+    fn draw_with(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        mapping: Mapping,
+        bind_group: &wgpu::BindGroup,
+        mesh: &GpuMesh,
+    ) {
         pass.set_pipeline(&self.pipelines[&mapping]);
-        pass.set_bind_group(0, &material.bind_group, &[]);
+        pass.set_bind_group(0, bind_group, &[]);
         pass.set_vertex_buffer(0, mesh.vertices.slice(..));
         pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
         pass.draw_indexed(0..mesh.count, 0, 0..1);
