@@ -205,7 +205,10 @@ fn renders(
         }
     }
     if let Some(lpca) = lpca {
-        let mesh = MeshKind::Sphere.build(64, 1.0)?;
+        // The measured tile repeats so that a texel covers as much of the sphere as a texel of
+        // the MRF textures above (the tiles are `side` texels wide, the measurement narrower).
+        let repeats = (side as f32 / lpca.width().max(1) as f32).max(1.0);
+        let mesh = MeshKind::Sphere.build(64, repeats)?;
         for (theta, phi) in RENDER_LIGHTS {
             let scene = Scene {
                 camera: Camera::orbit(Direction::new(35.0, 270.0), 4.2),
