@@ -200,12 +200,15 @@ fn transform(in: VertexInput, position: vec3<f32>) -> VertexOutput {
     return out;
 }
 
-// The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
-// light) pairs blend their clusters' subspace images, then the range map's normal relights
-// the blend for the light, divided by the mean shading so that the subspace images' own
-// average shading is not applied twice (bump_relight). Clusters that were not synthesized
-// (outside the planned set) are skipped and the weights renormalised.
-fn shade_mrf(in: VertexOutput) -> vec4<f32> {
+// View and light of a fragment in its tangent frame (unit vectors), and the point light's
+// inverse-square falloff (1 for a directional light): what every BTF pipeline starts from.
+struct TangentDirections {
+    v: vec3<f32>,
+    l: vec3<f32>,
+    falloff: f32,
+}
+
+fn tangent_directions(in: VertexOutput) -> TangentDirections {
     let frame = tangent_frame(in.normal, in.tangent);
     let to_world = transpose(frame);
     var v_world = globals.camera.xyz;
@@ -219,8 +222,19 @@ fn shade_mrf(in: VertexOutput) -> vec4<f32> {
         l_world = globals.light.xyz - in.world;
         falloff = globals.params.x / max(dot(l_world, l_world), 1e-8);
     }
-    let v = to_world * v_world;
-    let l = to_world * normalize(l_world);
+    return TangentDirections(to_world * v_world, to_world * normalize(l_world), falloff);
+}
+
+// The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
+// light) pairs blend their clusters' subspace images, then the range map's normal relights
+// the blend for the light, divided by the mean shading so that the subspace images' own
+// average shading is not applied twice (bump_relight). Clusters that were not synthesized
+// (outside the planned set) are skipped and the weights renormalised.
+fn shade_mrf(in: VertexOutput) -> vec4<f32> {
+    let dirs = tangent_directions(in);
+    let v = dirs.v;
+    let l = dirs.l;
+    let falloff = dirs.falloff;
     let ddx = dpdx(in.uv);
     let ddy = dpdy(in.uv);
     let relief_here = textureSampleGrad(relief, tex_sampler, in.uv, ddx, ddy);

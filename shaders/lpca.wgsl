@@ -46,21 +46,10 @@ fn vs_main(in: VertexInput) -> VertexOutput {
 
 @fragment
 fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
-    let frame = tangent_frame(in.normal, in.tangent);
-    let to_world = transpose(frame);
-    var v_world = globals.camera.xyz;
-    if (globals.camera.w > 0.5) {
-        v_world = globals.camera.xyz - in.world;
-    }
-    v_world = normalize(v_world);
-    var l_world = globals.light.xyz;
-    var falloff = 1.0;
-    if (globals.light.w > 0.5) {
-        l_world = globals.light.xyz - in.world;
-        falloff = globals.params.x / max(dot(l_world, l_world), 1e-8);
-    }
-    let v = to_world * v_world;
-    let l = to_world * normalize(l_world);
+    let dirs = tangent_directions(in);
+    let v = dirs.v;
+    let l = dirs.l;
+    let falloff = dirs.falloff;
     if (l.z <= 0.0) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }

@@ -130,21 +130,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         tileable: args.tileable,
     };
     let start = Instant::now();
-    let out_name = args.out.to_string_lossy().to_ascii_lowercase();
-    let single =
-        out_name.ends_with(".png") || out_name.ends_with(".exr") || out_name.ends_with(".jpg");
-    if single {
-        let (Some(view), Some(light), 1, 1) = (
-            args.view.first(),
-            args.light.first(),
-            args.view.len(),
-            args.light.len(),
-        ) else {
-            bail!(
-                "one image (--out {}) needs exactly one --view and one --light",
-                args.out.display()
-            );
-        };
+    if let Some((view, light)) = single_pair(&args)? {
         let subspaces = model.subspace_weights(view, light)?.len();
         let image = model.synthesize_image(view, light, &options)?;
         let seconds = start.elapsed().as_secs_f64();
@@ -287,21 +273,7 @@ fn run_lpca(args: Args, global: &Global) -> anyhow::Result<()> {
         );
     }
     let start = Instant::now();
-    let out_name = args.out.to_string_lossy().to_ascii_lowercase();
-    let single =
-        out_name.ends_with(".png") || out_name.ends_with(".exr") || out_name.ends_with(".jpg");
-    let images = if single {
-        let (Some(view), Some(light), 1, 1) = (
-            args.view.first(),
-            args.light.first(),
-            args.view.len(),
-            args.light.len(),
-        ) else {
-            bail!(
-                "one image (--out {}) needs exactly one --view and one --light",
-                args.out.display()
-            );
-        };
+    let images = if let Some((view, light)) = single_pair(&args)? {
         let image = model.reconstruct_direction(view, light)?;
         io::write_image(&args.out, &image)
             .with_context(|| format!("writing {}", args.out.display()))?;
@@ -354,6 +326,25 @@ fn run_lpca(args: Args, global: &Global) -> anyhow::Result<()> {
             "wrote {} ({images} image(s) rebuilt from the LPCA model) in {seconds:.3} s",
             args.out.display()
         ))
+    }
+}
+
+/// The one (view, light) pair to write when `--out` names a single image (.png, .exr, .jpg);
+/// `None` when it names a BTF (zip or folder).
+fn single_pair(args: &Args) -> anyhow::Result<Option<(&Direction, &Direction)>> {
+    let out_name = args.out.to_string_lossy().to_ascii_lowercase();
+    if ![".png", ".exr", ".jpg"]
+        .iter()
+        .any(|e| out_name.ends_with(e))
+    {
+        return Ok(None);
+    }
+    match (args.view.as_slice(), args.light.as_slice()) {
+        ([view], [light]) => Ok(Some((view, light))),
+        _ => bail!(
+            "one image (--out {}) needs exactly one --view and one --light",
+            args.out.display()
+        ),
     }
 }
 
