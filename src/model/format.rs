@@ -218,38 +218,7 @@ pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<MaterialModel> {
 }
 
 fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
-    let mut header = Reader { bytes, pos: 0 };
-    if header
-        .take(4)
-        .map_err(|_| "not a .btfm model (too short)".to_string())?
-        != MAGIC
-    {
-        return Err("not a .btfm model (wrong magic bytes)".into());
-    }
-    let version = header.u16()?;
-    if version != VERSION {
-        return Err(format!(
-            "format version {version}; this build reads version {VERSION}"
-        ));
-    }
-    let _flags = header.u16()?;
-    let len = header.u32()?;
-    if len > MAX_PAYLOAD {
-        return Err(format!(
-            "payload of {len} bytes exceeds the {MAX_PAYLOAD}-byte limit"
-        ));
-    }
-    let payload = header.take(len as usize)?;
-    let crc = header.u32()?;
-    if crc != crc32fast::hash(payload) {
-        return Err("checksum mismatch: the file is corrupt".into());
-    }
-    if header.pos != bytes.len() {
-        return Err(format!(
-            "{} unexpected bytes after the checksum",
-            bytes.len() - header.pos
-        ));
-    }
+    let payload = crate::btf::io::envelope::open(bytes, MAGIC, ".btfm", VERSION, MAX_PAYLOAD)?;
     let mut r = Reader {
         bytes: payload,
         pos: 0,

@@ -2,6 +2,7 @@
 //! JPEG/PNG/EXR images), RTI folders with a `.lp` light file, single images, and atomic writes
 //! (temporary name, then rename) so that no half-written output is ever left as if complete.
 
+pub(crate) mod envelope;
 pub mod image;
 pub mod rti;
 pub mod ubo2003;
