@@ -7,8 +7,8 @@
 //! same random field filtered differently, and the same position shows corresponding structure
 //! under every view and light, so a moving light does not make the texture boil.
 
-use std::collections::BTreeMap;
-use std::sync::OnceLock;
+use std::collections::{BTreeMap, HashMap};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use ndarray::{Array2, Array3, Axis};
 use rayon::prelude::*;
@@ -18,6 +18,8 @@ use crate::decompose::marginals::match_marginal;
 use crate::decompose::pyramid::{Taps, apply_separable};
 use crate::decompose::{Border, Pyramid};
 use crate::model::{BandModel, LevelModel, MaterialModel, ModelError, Result};
+use crate::mrf::noise::standard_normal;
+use crate::mrf::{Car2dModel, Car3dModel, GmrfModel};
 
 /// The largest synthesized side, pixels (a 4096^2 image peaks near 2 GB; 8192^2 near 8 GB).
 pub const MAX_SIDE: usize = 8192;
@@ -43,6 +45,50 @@ pub struct SynthesisCache {
     options: SynthesisOptions,
     subspaces: Vec<OnceLock<Array3<f32>>>,
     normals: Option<Array3<f64>>,
+    noise: NoiseBank,
+}
+
+/// The driving noise of the bands by band seed. Every subspace image uses the same noise for a
+/// band (that is what keeps them coherent), so a cache draws it once and keeps it; a single
+/// subspace image draws it and lets it go.
+#[derive(Debug)]
+struct NoiseBank {
+    kept: Option<Mutex<HashMap<u64, Arc<Vec<f64>>>>>,
+}
+
+impl NoiseBank {
+    fn kept() -> Self {
+        Self {
+            kept: Some(Mutex::new(HashMap::new())),
+        }
+    }
+
+    fn transient() -> Self {
+        Self { kept: None }
+    }
+
+    /// At least `len` unit Gaussian values for band `seed` (a longer draw from the same seed
+    /// starts with the same values, so one kept draw serves every shorter request). No lock is
+    /// held while drawing: concurrent first requests may both draw, and get the same values.
+    fn draw(&self, seed: u64, len: usize) -> Arc<Vec<f64>> {
+        let Some(kept) = &self.kept else {
+            return Arc::new(standard_normal(seed, len));
+        };
+        let lock = || {
+            kept.lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+        };
+        if let Some(values) = lock().get(&seed).filter(|v| v.len() >= len) {
+            return Arc::clone(values);
+        }
+        let values = Arc::new(standard_normal(seed, len));
+        let mut map = lock();
+        let entry = map.entry(seed).or_insert_with(|| Arc::clone(&values));
+        if entry.len() < len {
+            *entry = Arc::clone(&values);
+        }
+        Arc::clone(entry)
+    }
 }
 
 impl SynthesisCache {
@@ -68,12 +114,9 @@ impl SynthesisCache {
     }
 }
 
-/// A seed for one band: mixes the user's seed with the band's identity (splitmix64).
+/// A seed for one band: mixes the user's seed with the band's identity.
 fn band_seed(seed: u64, factor: usize, level: usize) -> u64 {
-    let mut z = seed ^ ((factor as u64) << 32 | level as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
+    crate::mrf::noise::mix(seed, (factor as u64) << 32 | level as u64)
 }
 
 fn check(model: &MaterialModel, o: &SynthesisOptions) -> Result<()> {
@@ -106,6 +149,17 @@ impl MaterialModel {
     /// `k` out of range, or a size of zero, beyond [`MAX_SIDE`], or not tileable.
     pub fn synthesize_subspace(&self, k: usize, o: &SynthesisOptions) -> Result<Array3<f32>> {
         check(self, o)?;
+        self.subspace_image(k, o, &NoiseBank::transient())
+    }
+
+    /// Subspace image `k` with band noise from `noise`: every band synthesized in parallel,
+    /// then per KL factor (or colour band) the pyramid collapsed and the marginal matched.
+    fn subspace_image(
+        &self,
+        k: usize,
+        o: &SynthesisOptions,
+        noise: &NoiseBank,
+    ) -> Result<Array3<f32>> {
         let s = self.subspaces.get(k).ok_or_else(|| {
             ModelError::parameter("subspace", format!("{k} of {}", self.subspaces.len()))
         })?;
@@ -115,59 +169,68 @@ impl MaterialModel {
         } else {
             Border::Mirror
         };
-        let factors: [Array2<f64>; 3] = match &s.levels[0] {
+        let n = s.levels.len();
+        // bands[factor][level]
+        let bands: Vec<Vec<Array2<f64>>> = match &s.levels[0] {
             LevelModel::Joint(_) => {
-                let bands: Vec<Array3<f64>> = s
+                let joint: Vec<Array3<f64>> = s
                     .levels
                     .par_iter()
                     .zip(&shapes)
                     .enumerate()
                     .map(|(lv, (level, &(r, c)))| match level {
                         LevelModel::Joint(m) => {
-                            m.synthesize(r, c, band_seed(o.seed, 3, lv), o.tileable)
+                            let len = Car3dModel::noise_len(r, c, o.tileable);
+                            let w = noise.draw(band_seed(o.seed, 3, lv), len);
+                            m.synthesize_from(r, c, &w, o.tileable)
                         }
                         LevelModel::Factors(_) => Array3::zeros((3, r, c)),
                     })
                     .collect();
-                std::array::from_fn(|ch| {
-                    Pyramid {
-                        bands: bands
+                (0..3)
+                    .map(|ch| {
+                        joint
                             .iter()
                             .map(|b| b.index_axis(Axis(0), ch).to_owned())
-                            .collect(),
-                    }
-                    .collapse_with(border)
-                })
+                            .collect()
+                    })
+                    .collect()
             }
             LevelModel::Factors(_) => {
-                let planes: Vec<Array2<f64>> = (0..3 * s.levels.len())
+                let mut planes: Vec<Array2<f64>> = (0..3 * n)
                     .into_par_iter()
                     .map(|i| {
-                        let (factor, lv) = (i / s.levels.len(), i % s.levels.len());
+                        let (factor, lv) = (i / n, i % n);
                         let (r, c) = shapes[lv];
                         let seed = band_seed(o.seed, factor, lv);
                         match &s.levels[lv] {
                             LevelModel::Factors(bands) => match &bands[factor] {
-                                BandModel::Car2d(m) => m.synthesize(r, c, seed, o.tileable),
-                                BandModel::Gmrf(m) => m.synthesize(r, c, seed),
+                                BandModel::Car2d(m) => {
+                                    let len = Car2dModel::noise_len(r, c, o.tileable);
+                                    m.synthesize_from(r, c, &noise.draw(seed, len), o.tileable)
+                                }
+                                BandModel::Gmrf(m) => {
+                                    let len = GmrfModel::noise_len(r, c);
+                                    m.synthesize_from(r, c, &noise.draw(seed, len))
+                                }
                             },
                             LevelModel::Joint(_) => Array2::zeros((r, c)),
                         }
                     })
                     .collect();
-                let n = s.levels.len();
-                std::array::from_fn(|factor| {
-                    Pyramid {
-                        bands: planes[factor * n..(factor + 1) * n].to_vec(),
-                    }
-                    .collapse_with(border)
-                })
+                (0..3).map(|_| planes.drain(..n).collect()).collect()
             }
         };
-        let mut factors = factors;
-        for (plane, target) in factors.iter_mut().zip(&s.marginals) {
-            match_marginal(plane, target);
-        }
+        let factors: Vec<Array2<f64>> = bands
+            .into_par_iter()
+            .zip(&s.marginals)
+            .map(|(bands, target)| {
+                let mut plane = Pyramid { bands }.collapse_with(border);
+                match_marginal(&mut plane, target);
+                plane
+            })
+            .collect();
+        let factors: [Array2<f64>; 3] = factors.try_into().expect("three factors");
         Ok(s.kl.inverse(&factors))
     }
 
@@ -230,7 +293,8 @@ impl MaterialModel {
         light: &Direction,
         o: &SynthesisOptions,
     ) -> Result<Array3<f32>> {
-        self.image_from_cache(&self.synthesis_cache(o)?, view, light)
+        let clusters: Vec<usize> = self.subspace_weights(view, light)?.into_keys().collect();
+        self.image_from_cache(&self.synthesis_cache_for(&clusters, o)?, view, light)
     }
 
     /// An empty cache for synthesizing many images of one size and seed: each subspace image
@@ -240,11 +304,16 @@ impl MaterialModel {
     /// An invalid size.
     pub fn synthesis_cache(&self, o: &SynthesisOptions) -> Result<SynthesisCache> {
         check(self, o)?;
-        Ok(SynthesisCache {
+        Ok(self.empty_cache(o, self.range_normals(o.rows, o.cols, o.tileable)))
+    }
+
+    fn empty_cache(&self, o: &SynthesisOptions, normals: Option<Array3<f64>>) -> SynthesisCache {
+        SynthesisCache {
             options: *o,
             subspaces: (0..self.subspaces.len()).map(|_| OnceLock::new()).collect(),
-            normals: self.range_normals(o.rows, o.cols, o.tileable),
-        })
+            normals,
+            noise: NoiseBank::kept(),
+        }
     }
 
     /// The BTF image for (view, light) as [`MaterialModel::synthesize_image`] makes it, drawing
@@ -259,10 +328,15 @@ impl MaterialModel {
         light: &Direction,
     ) -> Result<Array3<f32>> {
         let o = &cache.options;
-        let mut out = Array3::<f32>::zeros((3, o.rows, o.cols));
+        let mut out: Option<Array3<f32>> = None;
         for (k, w) in self.subspace_weights(view, light)? {
-            out.scaled_add(w as f32, self.subspace_from_cache(cache, k)?);
+            let part = self.subspace_from_cache(cache, k)?;
+            match &mut out {
+                None => out = Some(part.mapv(|v| w as f32 * v)),
+                Some(out) => out.scaled_add(w as f32, part),
+            }
         }
+        let mut out = out.unwrap_or_else(|| Array3::zeros((3, o.rows, o.cols)));
         if let Some(normals) = &cache.normals {
             bump_relight(&mut out, normals, light);
         }
@@ -285,7 +359,7 @@ impl MaterialModel {
         match slot.get() {
             Some(part) => Ok(part),
             None => {
-                let made = self.synthesize_subspace(k, &cache.options)?;
+                let made = self.subspace_image(k, &cache.options, &cache.noise)?;
                 Ok(slot.get_or_init(|| made))
             }
         }
@@ -301,7 +375,21 @@ impl MaterialModel {
         clusters: &[usize],
         o: &SynthesisOptions,
     ) -> Result<SynthesisCache> {
-        let cache = self.synthesis_cache(o)?;
+        check(self, o)?;
+        // The first image draws every band's noise (while the range map's normals are made
+        // beside it); the others reuse it, in parallel.
+        let (normals, cache) = rayon::join(
+            || self.range_normals(o.rows, o.cols, o.tileable),
+            || -> Result<SynthesisCache> {
+                let cache = self.empty_cache(o, None);
+                if let Some(&first) = clusters.first() {
+                    self.subspace_from_cache(&cache, first)?;
+                }
+                Ok(cache)
+            },
+        );
+        let mut cache = cache?;
+        cache.normals = normals;
         clusters
             .par_iter()
             .try_for_each(|&k| self.subspace_from_cache(&cache, k).map(|_| ()))?;
@@ -368,16 +456,22 @@ impl MaterialModel {
 pub fn bump_relight(image: &mut Array3<f32>, normals: &Array3<f64>, light: &Direction) {
     let l = light.vector();
     let (_, h, w) = normals.dim();
-    let shade = Array2::from_shape_fn((h, w), |(y, x)| {
-        (normals[[0, y, x]] * l[0] + normals[[1, y, x]] * l[1] + normals[[2, y, x]] * l[2]).max(0.0)
+    let mut shade = Array2::<f64>::zeros((h, w));
+    ndarray::par_azip!((s in &mut shade, &x in &normals.index_axis(Axis(0), 0),
+        &y in &normals.index_axis(Axis(0), 1), &z in &normals.index_axis(Axis(0), 2)) {
+        *s = (x * l[0] + y * l[1] + z * l[2]).max(0.0);
     });
     let mean = shade.sum() / shade.len().max(1) as f64;
     if mean < 1e-3 {
         return;
     }
-    for mut channel in image.axis_iter_mut(Axis(0)) {
-        channel.zip_mut_with(&shade, |v, s| *v *= (s / mean) as f32);
-    }
+    let inv = 1.0 / mean;
+    image
+        .axis_iter_mut(Axis(0))
+        .into_par_iter()
+        .for_each(|mut channel| {
+            channel.zip_mut_with(&shade, |v, s| *v *= (s * inv) as f32);
+        });
 }
 
 #[cfg(test)]

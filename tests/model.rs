@@ -320,3 +320,24 @@ fn synthesis_at_4096_squared() {
         assert!(im.iter().all(|v| v.is_finite()), "{}", m.kind);
     }
 }
+
+#[test]
+fn a_cache_shares_noise_without_changing_any_image() {
+    // A cache draws each band's noise once for all subspace images; every image must be the
+    // one a standalone synthesis makes, bit for bit, plain and tileable, for every model kind.
+    for model in models() {
+        for tileable in [false, true] {
+            let o = SynthesisOptions {
+                tileable,
+                ..opts(48, 5)
+            };
+            let all: Vec<usize> = (0..model.subspaces.len()).collect();
+            let cache = model.synthesis_cache_for(&all, &o).unwrap();
+            assert_eq!(cache.synthesized(), all.len());
+            for &k in &all {
+                let alone = model.synthesize_subspace(k, &o).unwrap();
+                assert_eq!(cache.get(k), Some(&alone), "{:?} subspace {k}", model.kind);
+            }
+        }
+    }
+}

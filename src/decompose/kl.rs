@@ -3,7 +3,8 @@
 //! by its own mono-spectral MRF.
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
-use ndarray::{Array2, Array3, Axis};
+use ndarray::{Array2, Array3, Axis, Zip};
+use rayon::prelude::*;
 
 /// A colour mean and orthonormal basis: `factor = T^T (rgb - mean)`, `rgb = T factor + mean`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -74,10 +75,21 @@ impl KlBasis {
     /// The image from its factor planes (all of one shape).
     pub fn inverse(&self, factors: &[Array2<f64>; 3]) -> Array3<f32> {
         let (h, w) = factors[0].dim();
-        Array3::from_shape_fn((3, h, w), |(c, y, x)| {
-            let v: f64 = (0..3).map(|k| self.basis[c][k] * factors[k][[y, x]]).sum();
-            (v + self.mean[c]) as f32
-        })
+        let mut out = Array3::<f32>::zeros((3, h, w));
+        out.axis_iter_mut(Axis(0))
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(c, mut channel)| {
+                let (b, mean) = (self.basis[c], self.mean[c]);
+                Zip::from(&mut channel)
+                    .and(&factors[0])
+                    .and(&factors[1])
+                    .and(&factors[2])
+                    .for_each(|o, &f0, &f1, &f2| {
+                        *o = (b[0] * f0 + b[1] * f1 + b[2] * f2 + mean) as f32;
+                    });
+            });
+        out
     }
 }
 

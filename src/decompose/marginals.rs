@@ -61,8 +61,9 @@ pub fn match_marginal(plane: &mut Array2<f64>, target: &Quantiles) {
     // source range and interpolate, one multiply-add per pixel instead of a search.
     let step = (hi - lo) / LUT as f64;
     let table: Vec<f64> = (0..=LUT).map(|i| map(lo + step * i as f64)).collect();
-    plane.mapv_inplace(|v| {
-        let x = ((v - lo) / step).clamp(0.0, LUT as f64);
+    let per_step = 1.0 / step;
+    plane.par_mapv_inplace(|v| {
+        let x = ((v - lo) * per_step).clamp(0.0, LUT as f64);
         let i = (x as usize).min(LUT - 1);
         table[i] + (table[i + 1] - table[i]) * (x - i as f64)
     });

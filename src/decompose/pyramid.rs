@@ -104,11 +104,13 @@ pub(crate) fn apply_separable(
     for (src, mut dst) in tmp.rows().into_iter().zip(out.rows_mut()) {
         let src = src.as_slice().expect("standard layout");
         let dst = dst.as_slice_mut().expect("standard layout");
-        for (i, d) in dst.iter_mut().enumerate() {
-            *d = flat[starts[i]..starts[i + 1]]
-                .iter()
-                .map(|&(j, w)| w * src[j])
-                .sum();
+        for (d, span) in dst.iter_mut().zip(starts.windows(2)) {
+            // Unrolled for the common tap counts (2 and 3 when expanding, 2 when resampling).
+            *d = match flat[span[0]..span[1]] {
+                [(a, wa), (b, wb)] => wa * src[a] + wb * src[b],
+                [(a, wa), (b, wb), (c, wc)] => wa * src[a] + wb * src[b] + wc * src[c],
+                ref taps => taps.iter().map(|&(j, w)| w * src[j]).sum(),
+            };
         }
     }
     out
@@ -178,7 +180,9 @@ impl Pyramid {
             .cloned()
             .unwrap_or_else(|| Array2::zeros((0, 0)));
         for band in iter {
-            current = band + &expand_with(&current, band.nrows(), band.ncols(), border);
+            let mut up = expand_with(&current, band.nrows(), band.ncols(), border);
+            up += band;
+            current = up;
         }
         current
     }

@@ -2,7 +2,7 @@
 //! least-squares projection of a gradient field onto integrable surfaces, computed with FFTs on
 //! the mirror-padded field (mrf_math.md 1(b)).
 
-use ndarray::{Array2, Array3, s};
+use ndarray::{Array2, Array3, Zip, s};
 use rustfft::num_complex::Complex64;
 
 use crate::fft;
@@ -81,23 +81,38 @@ pub fn normals_of_periodic(heights: &Array2<f64>) -> Array3<f64> {
     normals_with(heights, |i, n| i.rem_euclid(n as isize) as usize)
 }
 
-fn normals_with(heights: &Array2<f64>, index: impl Fn(isize, usize) -> usize) -> Array3<f64> {
+fn normals_with(
+    heights: &Array2<f64>,
+    index: impl Fn(isize, usize) -> usize + Sync,
+) -> Array3<f64> {
     let (h, w) = heights.dim();
-    let at = |y: isize, x: isize| heights[[index(y, h), index(x, w)]];
     let (sx, sy) = (if w > 1 { 2.0 } else { 1.0 }, if h > 1 { 2.0 } else { 1.0 });
     let mut out = Array3::zeros((3, h, w));
-    for y in 0..h as isize {
-        for x in 0..w as isize {
-            let dx = (at(y, x + 1) - at(y, x - 1)) / sx;
-            let dr = (at(y + 1, x) - at(y - 1, x)) / sy;
-            // y is up: dh/dy = -dh/drow.
-            let n = [-dx, dr, 1.0];
-            let len = (n[0] * n[0] + n[1] * n[1] + 1.0).sqrt();
-            for c in 0..3 {
-                out[[c, y as usize, x as usize]] = n[c] / len;
+    let (mut nx, mut ny, mut nz) =
+        out.multi_slice_mut((s![0, .., ..], s![1, .., ..], s![2, .., ..]));
+    // Neighbour columns, shared by every row.
+    let sides: Vec<(usize, usize)> = (0..w as isize)
+        .map(|x| (index(x - 1, w), index(x + 1, w)))
+        .collect();
+    Zip::indexed(nx.rows_mut())
+        .and(ny.rows_mut())
+        .and(nz.rows_mut())
+        .par_for_each(|y, mut rx, mut ry, mut rz| {
+            let (row, up, down) = (
+                heights.row(y),
+                heights.row(index(y as isize - 1, h)),
+                heights.row(index(y as isize + 1, h)),
+            );
+            for (x, &(left, right)) in sides.iter().enumerate() {
+                let dx = (row[right] - row[left]) / sx;
+                let dr = (down[x] - up[x]) / sy;
+                // y is up: dh/dy = -dh/drow.
+                let len = (dx * dx + dr * dr + 1.0).sqrt();
+                rx[x] = -dx / len;
+                ry[x] = dr / len;
+                rz[x] = 1.0 / len;
             }
-        }
-    }
+        });
     out
 }
 

@@ -3,15 +3,13 @@
 //! matrices `A_s` and correlated noise `e_r ~ N(0, Sigma)`. It models the colour channels
 //! jointly, so no KL decorrelation is needed and spatial cross-channel correlation is kept.
 
+use super::Car2dModel;
+use super::car2d::{MARGIN, bounded_sample, solve_on_torus};
+use super::neighbourhood::{causal, reach};
+use super::noise::standard_normal;
+use super::{Car3dFit, choose_stable, is_flat};
 use nalgebra::{DMatrix, Matrix3};
 use ndarray::Array3;
-use rand::SeedableRng;
-use rand_distr::{Distribution, StandardNormal};
-use rand_pcg::Pcg64Mcg;
-
-use super::car2d::{MARGIN, bounded_sample};
-use super::neighbourhood::{causal, reach};
-use super::{Car3dFit, choose_stable, is_flat};
 
 /// Channels modelled jointly (RGB).
 pub const D: usize = 3;
@@ -263,12 +261,40 @@ impl Car3dModel {
     /// A `(3, rows, cols)` sample by the causal recursion with a burn-in margin; the same seed
     /// and size give the same driving noise for every model.
     pub fn synthesize(&self, rows: usize, cols: usize, seed: u64, tileable: bool) -> Array3<f64> {
+        let noise = standard_normal(seed, Self::noise_len(rows, cols, tileable));
+        self.synthesize_from(rows, cols, &noise, tileable)
+    }
+
+    /// How many unit Gaussian values [`Car3dModel::synthesize_from`] consumes for a sample of
+    /// this size: three per site, the burn-in margin included.
+    pub fn noise_len(rows: usize, cols: usize, tileable: bool) -> usize {
+        3 * Car2dModel::noise_len(rows, cols, tileable)
+    }
+
+    /// [`Car3dModel::synthesize`] driven by given unit Gaussian `noise`, of at least
+    /// [`Car3dModel::noise_len`] values, three per site in the order the recursion visits them.
+    ///
+    /// # Panics
+    /// If `noise` is shorter than [`Car3dModel::noise_len`].
+    pub fn synthesize_from(
+        &self,
+        rows: usize,
+        cols: usize,
+        noise: &[f64],
+        tileable: bool,
+    ) -> Array3<f64> {
+        let needed = Self::noise_len(rows, cols, tileable);
+        assert!(
+            noise.len() >= needed,
+            "{} noise values for {needed}",
+            noise.len()
+        );
         let offsets = causal(self.order as usize);
         let l = self.noise_factor();
         let a: Vec<Matrix3<f64>> = (0..offsets.len()).map(|k| self.a_matrix(k)).collect();
-        let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        let mut draws = noise.chunks_exact(3);
         let mut innovation = || -> [f64; 3] {
-            let w: [f64; 3] = std::array::from_fn(|_| StandardNormal.sample(&mut rng));
+            let w = draws.next().expect("length checked");
             std::array::from_fn(|p| (0..=p).map(|q| l[(p, q)] * w[q]).sum())
         };
         let apply = |acc: &mut [f64; 3], ak: &Matrix3<f64>, prev: [f64; 3]| {
@@ -280,22 +306,29 @@ impl Car3dModel {
             return Array3::zeros((3, rows, cols));
         }
         if tileable {
-            // Two raster passes on the torus, as for the 2D CAR: the second sees wrapped
-            // neighbours from the first, so the result tiles (approximately stationary).
+            // Solved on the torus as for the 2D CAR: the same innovations every sweep.
+            let innovations: Vec<[f64; 3]> = (0..rows * cols).map(|_| innovation()).collect();
+            let scale = l.norm().max(f64::MIN_POSITIVE);
             let mut y = vec![[0.0f64; 3]; rows * cols];
-            for _pass in 0..2 {
+            solve_on_torus(|| {
+                let mut change = 0.0f64;
                 for r in 0..rows {
                     for c in 0..cols {
-                        let mut acc = innovation();
+                        let mut acc = innovations[r * cols + c];
                         for (ak, &(s1, s2)) in a.iter().zip(offsets) {
                             let rr = (r as isize - s1).rem_euclid(rows as isize) as usize;
                             let cc = (c as isize - s2).rem_euclid(cols as isize) as usize;
                             apply(&mut acc, ak, y[rr * cols + cc]);
                         }
+                        let old = y[r * cols + c];
+                        for p in 0..3 {
+                            change = change.max((acc[p] - old[p]).abs());
+                        }
                         y[r * cols + c] = acc;
                     }
                 }
-            }
+                change / scale
+            });
             return Array3::from_shape_fn((3, rows, cols), |(ch, r, c)| {
                 y[r * cols + c][ch] + self.mean[ch]
             });
@@ -327,6 +360,7 @@ impl Car3dModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ndarray::s;
 
     fn truth() -> Car3dModel {
         // Order 1: left and upper neighbours, with cross-channel terms.
@@ -339,6 +373,26 @@ mod tests {
             sigma: [1.0, 0.5, 0.2, 0.5, 1.0, 0.3, 0.2, 0.3, 0.8],
             mean: [0.5, -0.2, 1.0],
         }
+    }
+
+    #[test]
+    fn toroidal_synthesis_wraps() {
+        // Channel 0: the correlation across the seams matches the interior one.
+        let (mut inner, mut seams) = (0.0, 0.0);
+        for seed in 0..8 {
+            let y = truth().synthesize(48, 48, seed, true);
+            let y0 = y.index_axis(ndarray::Axis(0), 0);
+            let corr = |a: ndarray::ArrayView2<f64>, b: ndarray::ArrayView2<f64>| {
+                crate::eval::correlation(&a.to_owned(), &b.to_owned()) / 8.0
+            };
+            inner += corr(y0.slice(s![.., 0..47]), y0.slice(s![.., 1..48]));
+            seams += 0.5 * corr(y0.slice(s![.., 47..48]), y0.slice(s![.., 0..1]));
+            seams += 0.5 * corr(y0.slice(s![47..48, ..]), y0.slice(s![0..1, ..]));
+        }
+        assert!(
+            inner > 0.3 && (inner - seams).abs() < 0.1,
+            "{inner} vs {seams}"
+        );
     }
 
     #[test]

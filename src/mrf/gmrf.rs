@@ -6,11 +6,10 @@
 
 use nalgebra::{DMatrix, DVector};
 use ndarray::Array2;
-use rand::SeedableRng;
-use rand_distr::{Distribution, StandardNormal};
-use rand_pcg::Pcg64Mcg;
+use rustfft::num_complex::Complex64;
 
 use super::neighbourhood::{MAX_ORDER, causal};
+use super::noise::standard_normal;
 use super::{GmrfFit, is_flat};
 use crate::fft;
 
@@ -207,27 +206,41 @@ impl GmrfModel {
         }
     }
 
-    /// `mu(omega) = 1 - 2 sum_s gamma_s cos(omega . s)` on the `rows` x `cols` DFT grid.
-    /// The cosine of a sum is expanded into per-axis tables, so no trigonometry runs per bin.
+    /// `mu(omega) = 1 - 2 sum_s gamma_s cos(omega . s)` on the `rows` x `cols` DFT grid, stored
+    /// column by column: shape (cols, rows), bin (k1, k2) at `[k2, k1]`. The cosine of a sum
+    /// is expanded into per-axis tables, and the offsets sharing a row offset `s1` into one pair
+    /// of column tables, so no trigonometry runs per bin and at most four terms do.
     fn denominators(&self, rows: usize, cols: usize) -> Array2<f64> {
-        let offsets = causal(self.order as usize);
         let tau = 2.0 * std::f64::consts::PI;
-        let table = |n: usize, s: isize| -> SinCos {
-            (0..n)
-                .map(|k| (tau * k as f64 * s as f64 / n as f64).sin_cos())
-                .collect()
+        let angles = |n: usize, s: isize| {
+            (0..n).map(move |k| (tau * k as f64 * s as f64 / n as f64).sin_cos())
         };
-        let tables: Vec<(f64, SinCos, SinCos)> = offsets
-            .iter()
-            .zip(&self.gamma)
-            .map(|(&(s1, s2), &g)| (g, table(rows, s1), table(cols, s2)))
-            .collect();
-        let mut mu = Array2::from_elem((rows, cols), 1.0);
-        for (g, t1, t2) in &tables {
-            for (k1, mut row) in mu.rows_mut().into_iter().enumerate() {
-                let (s1, c1) = t1[k1];
-                for (m, &(s2, c2)) in row.iter_mut().zip(t2) {
-                    *m -= 2.0 * g * (c1 * c2 - s1 * s2);
+        // Per row offset s1: (s1, sum_s2 gamma sin(omega2 s2), sum_s2 gamma cos(omega2 s2)).
+        let mut groups: Vec<(isize, Vec<f64>, Vec<f64>)> = Vec::new();
+        for (&(s1, s2), &g) in causal(self.order as usize).iter().zip(&self.gamma) {
+            let at = match groups.iter().position(|group| group.0 == s1) {
+                Some(at) => at,
+                None => {
+                    groups.push((s1, vec![0.0; cols], vec![0.0; cols]));
+                    groups.len() - 1
+                }
+            };
+            let (_, sines, cosines) = &mut groups[at];
+            for ((sum_s, sum_c), (sin, cos)) in sines
+                .iter_mut()
+                .zip(cosines.iter_mut())
+                .zip(angles(cols, s2))
+            {
+                *sum_s += g * sin;
+                *sum_c += g * cos;
+            }
+        }
+        let mut mu = Array2::from_elem((cols, rows), 1.0);
+        for (s1, sines, cosines) in &groups {
+            let row_angles: SinCos = angles(rows, *s1).collect();
+            for ((mut column, &gs), &gc) in mu.rows_mut().into_iter().zip(sines).zip(cosines) {
+                for (m, &(sin, cos)) in column.iter_mut().zip(&row_angles) {
+                    *m -= 2.0 * (cos * gc - sin * gs);
                 }
             }
         }
@@ -254,6 +267,31 @@ impl GmrfModel {
     /// by `sqrt(sigma^2 / mu)` in the frequency domain. The same seed and size give the same
     /// driving noise for every model (coherent subspaces).
     pub fn synthesize(&self, rows: usize, cols: usize, seed: u64) -> Array2<f64> {
+        self.synthesize_from(
+            rows,
+            cols,
+            &standard_normal(seed, Self::noise_len(rows, cols)),
+        )
+    }
+
+    /// How many unit Gaussian values [`GmrfModel::synthesize_from`] consumes: two (real and
+    /// imaginary part) per frequency bin.
+    pub fn noise_len(rows: usize, cols: usize) -> usize {
+        2 * rows * cols
+    }
+
+    /// [`GmrfModel::synthesize`] driven by given unit Gaussian `noise` (frequency-domain
+    /// pairs in raster order of the bins), of at least [`GmrfModel::noise_len`] values.
+    ///
+    /// # Panics
+    /// If `noise` is shorter than [`GmrfModel::noise_len`].
+    pub fn synthesize_from(&self, rows: usize, cols: usize, noise: &[f64]) -> Array2<f64> {
+        let needed = Self::noise_len(rows, cols);
+        assert!(
+            noise.len() >= needed,
+            "{} noise values for {needed}",
+            noise.len()
+        );
         if rows == 0 || cols == 0 {
             return Array2::zeros((rows, cols));
         }
@@ -264,18 +302,15 @@ impl GmrfModel {
         // unit power per bin) instead of transforming a real noise field: one FFT instead of
         // two. The real part of the inverse transform, scaled by sqrt(2 M N), has exactly the
         // model's covariance (1/MN) sum_k S_k cos(omega_k . lag).
-        let mut rng = Pcg64Mcg::seed_from_u64(seed);
         let half = std::f64::consts::FRAC_1_SQRT_2;
         let sigma2 = self.sigma2.max(0.0);
-        let spectrum = mu.mapv(|m| {
-            let (a, b): (f64, f64) = (
-                StandardNormal.sample(&mut rng),
-                StandardNormal.sample(&mut rng),
-            );
-            rustfft::num_complex::Complex64::new(a * half, b * half) * (sigma2 / m).sqrt()
-        });
+        let spectrum: Vec<Complex64> = mu
+            .iter()
+            .zip(noise.chunks_exact(2))
+            .map(|(m, w)| Complex64::new(w[0] * half, w[1] * half) * (sigma2 / m).sqrt())
+            .collect();
         let scale = (2.0 * (rows * cols) as f64).sqrt();
-        fft::inverse_real(&spectrum).mapv(|v| v * scale + self.mean)
+        fft::inverse_real_by_columns(spectrum, rows, cols, |v| v * scale + self.mean)
     }
 
     /// The stationary variance of the model on a `rows` x `cols` torus:

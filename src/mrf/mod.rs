@@ -5,6 +5,7 @@ pub mod car2d;
 pub mod car3d;
 pub mod gmrf;
 pub mod neighbourhood;
+pub mod noise;
 
 pub use car2d::Car2dModel;
 pub use car3d::Car3dModel;
