@@ -21,6 +21,7 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn fitted(kind: ModelKind) -> MaterialModel {
+    btfmrf::allocator::keep_freed_memory();
     let btf = Btf::synthetic(SyntheticMaterial::Sponge, 128, 1).expect("valid size");
     let options = AnalysisOptions {
         kind,

@@ -5,7 +5,7 @@
 use ndarray::Array2;
 use rayon::prelude::*;
 use rustfft::FftPlanner;
-use rustfft::num_complex::Complex64;
+use rustfft::num_complex::{Complex32, Complex64};
 
 /// In-place 2D transform of a row-major `rows x cols` buffer.
 fn transform(data: &mut Vec<Complex64>, rows: usize, cols: usize, inverse: bool) {
@@ -44,9 +44,11 @@ pub(crate) fn inverse_real(spectrum: &Array2<Complex64>) -> Array2<f64> {
 
 /// Inverse 2D DFT of a spectrum given column by column (`cols` runs of `rows` bins), normalised
 /// by `1 / (rows * cols)`: the real part, mapped by `f`, as a row-major `rows x cols` plane.
-/// Starting from columns saves one of the two transposes; the 1D transforms run in parallel.
+/// Starting from columns saves one of the two transposes; the 1D transforms run in parallel,
+/// in single precision (twice the vector width; about 1e-6 relative error, far below the
+/// sampling noise of the fields this synthesizes).
 pub(crate) fn inverse_real_by_columns(
-    mut data: Vec<Complex64>,
+    mut data: Vec<Complex32>,
     rows: usize,
     cols: usize,
     f: impl Fn(f64) -> f64 + Sync,
@@ -55,7 +57,7 @@ pub(crate) fn inverse_real_by_columns(
     if data.is_empty() {
         return Array2::zeros((rows, cols));
     }
-    let mut planner = FftPlanner::<f64>::new();
+    let mut planner = FftPlanner::<f32>::new();
     let (by_rows, by_cols) = (
         planner.plan_fft_inverse(rows),
         planner.plan_fft_inverse(cols),
@@ -64,12 +66,12 @@ pub(crate) fn inverse_real_by_columns(
     let batch = |n: usize| n * (65_536 / n).max(1);
     data.par_chunks_mut(batch(rows))
         .for_each(|chunk| by_rows.process(chunk));
-    let mut out = vec![Complex64::new(0.0, 0.0); data.len()];
+    let mut out = vec![Complex32::new(0.0, 0.0); data.len()];
     transpose::transpose(&data, &mut out, rows, cols);
     out.par_chunks_mut(batch(cols))
         .for_each(|chunk| by_cols.process(chunk));
     let n = out.len() as f64;
-    let values: Vec<f64> = out.par_iter().map(|c| f(c.re / n)).collect();
+    let values: Vec<f64> = out.par_iter().map(|c| f(f64::from(c.re) / n)).collect();
     Array2::from_shape_vec((rows, cols), values).expect("rows x cols values")
 }
 
@@ -98,8 +100,12 @@ mod tests {
         assert!((fr[[1, 0]].re - 16.0).abs() < 1e-9);
         // The column-major inverse agrees with the row-major one.
         let spectrum = forward(&x);
-        let by_columns: Vec<Complex64> = spectrum.t().iter().copied().collect();
+        let by_columns: Vec<Complex32> = spectrum
+            .t()
+            .iter()
+            .map(|c| Complex32::new(c.re as f32, c.im as f32))
+            .collect();
         let back = inverse_real_by_columns(by_columns, 6, 10, |v| 2.0 * v);
-        assert!((&back - &(2.0 * &x)).iter().all(|d| d.abs() < 1e-12));
+        assert!((&back - &(2.0 * &x)).iter().all(|d| d.abs() < 1e-5));
     }
 }

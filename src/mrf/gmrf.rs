@@ -6,7 +6,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use ndarray::Array2;
-use rustfft::num_complex::Complex64;
+use rustfft::num_complex::Complex32;
 
 use super::neighbourhood::{MAX_ORDER, causal};
 use super::noise::standard_normal;
@@ -304,10 +304,13 @@ impl GmrfModel {
         // model's covariance (1/MN) sum_k S_k cos(omega_k . lag).
         let half = std::f64::consts::FRAC_1_SQRT_2;
         let sigma2 = self.sigma2.max(0.0);
-        let spectrum: Vec<Complex64> = mu
+        let spectrum: Vec<Complex32> = mu
             .iter()
             .zip(noise.chunks_exact(2))
-            .map(|(m, w)| Complex64::new(w[0] * half, w[1] * half) * (sigma2 / m).sqrt())
+            .map(|(m, w)| {
+                let amplitude = half * (sigma2 / m).sqrt();
+                Complex32::new((w[0] * amplitude) as f32, (w[1] * amplitude) as f32)
+            })
             .collect();
         let scale = (2.0 * (rows * cols) as f64).sqrt();
         fft::inverse_real_by_columns(spectrum, rows, cols, |v| v * scale + self.mean)
