@@ -14,9 +14,12 @@ use ndarray::{Array2, Array3, Axis};
 use rayon::prelude::*;
 
 use crate::btf::{Direction, Weighted};
-use crate::decompose::marginals::match_marginal;
+use crate::decompose::marginals::MarginalMap;
 use crate::decompose::pyramid::{Taps, apply_separable};
 use crate::decompose::{Border, Pyramid};
+use crate::geometry::integrate::{
+    Border as NormalBorder, normals_of, normals_of_periodic, shading,
+};
 use crate::model::{BandModel, LevelModel, MaterialModel, ModelError, Result};
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{Car2dModel, Car3dModel, GmrfModel};
@@ -38,13 +41,14 @@ pub struct SynthesisOptions {
     pub tileable: bool,
 }
 
-/// Subspace images (made on first use) and range-map normals for one size and seed; see
+/// Subspace images (made on first use) and the range map for one size and seed; see
 /// [`MaterialModel::synthesis_cache`].
 #[derive(Debug)]
 pub struct SynthesisCache {
     options: SynthesisOptions,
     subspaces: Vec<OnceLock<Array3<f32>>>,
-    normals: Option<Array3<f64>>,
+    heights: Option<Array2<f64>>,
+    normals: OnceLock<Option<Array3<f64>>>,
     noise: NoiseBank,
 }
 
@@ -110,7 +114,30 @@ impl SynthesisCache {
     /// Unit normals of the range map at the cache's size, shape (3, rows, cols); `None` without
     /// a range map.
     pub fn normals(&self) -> Option<&Array3<f64>> {
-        self.normals.as_ref()
+        self.normals
+            .get_or_init(|| {
+                let heights = self.heights.as_ref()?;
+                Some(match self.border() {
+                    NormalBorder::Wrap => normals_of_periodic(heights),
+                    NormalBorder::Clamp => normals_of(heights),
+                })
+            })
+            .as_ref()
+    }
+
+    /// The range map at the cache's size, texels ([`MaterialModel::range_heights`]); `None`
+    /// without a range map.
+    pub fn heights(&self) -> Option<&Array2<f64>> {
+        self.heights.as_ref()
+    }
+
+    /// How the range map's differences treat its borders: wrapped when the synthesis tiles.
+    fn border(&self) -> NormalBorder {
+        if self.options.tileable {
+            NormalBorder::Wrap
+        } else {
+            NormalBorder::Clamp
+        }
     }
 }
 
@@ -221,17 +248,24 @@ impl MaterialModel {
                 (0..3).map(|_| planes.drain(..n).collect()).collect()
             }
         };
-        let factors: Vec<Array2<f64>> = bands
+        let factors: Vec<(Array2<f64>, MarginalMap)> = bands
             .into_par_iter()
             .zip(&s.marginals)
             .map(|(bands, target)| {
-                let mut plane = Pyramid { bands }.collapse_with(border);
-                match_marginal(&mut plane, target);
-                plane
+                let plane = Pyramid { bands }.collapse_with(border);
+                let map = MarginalMap::new(&plane, target);
+                (plane, map)
             })
             .collect();
+        let (factors, maps): (Vec<_>, Vec<_>) = factors.into_iter().unzip();
         let factors: [Array2<f64>; 3] = factors.try_into().expect("three factors");
-        Ok(s.kl.inverse(&factors))
+        Ok(s.kl.inverse_mapped(&factors, |f| {
+            [
+                maps[0].apply(f[0]),
+                maps[1].apply(f[1]),
+                maps[2].apply(f[2]),
+            ]
+        }))
     }
 
     /// The measured (view, light) pairs around a requested pair and their weights: the 3
@@ -298,20 +332,21 @@ impl MaterialModel {
     }
 
     /// An empty cache for synthesizing many images of one size and seed: each subspace image
-    /// is made once, on first use, and the range map's normals once, here.
+    /// is made once, on first use, and the range map once, here.
     ///
     /// # Errors
     /// An invalid size.
     pub fn synthesis_cache(&self, o: &SynthesisOptions) -> Result<SynthesisCache> {
         check(self, o)?;
-        Ok(self.empty_cache(o, self.range_normals(o.rows, o.cols, o.tileable)))
+        Ok(self.empty_cache(o, self.range_heights(o.rows, o.cols, o.tileable)))
     }
 
-    fn empty_cache(&self, o: &SynthesisOptions, normals: Option<Array3<f64>>) -> SynthesisCache {
+    fn empty_cache(&self, o: &SynthesisOptions, heights: Option<Array2<f64>>) -> SynthesisCache {
         SynthesisCache {
             options: *o,
             subspaces: (0..self.subspaces.len()).map(|_| OnceLock::new()).collect(),
-            normals,
+            heights,
+            normals: OnceLock::new(),
             noise: NoiseBank::kept(),
         }
     }
@@ -337,8 +372,8 @@ impl MaterialModel {
             }
         }
         let mut out = out.unwrap_or_else(|| Array3::zeros((3, o.rows, o.cols)));
-        if let Some(normals) = &cache.normals {
-            bump_relight(&mut out, normals, light);
+        if let Some(heights) = &cache.heights {
+            bump_relight(&mut out, heights, cache.border(), light);
         }
         Ok(out)
     }
@@ -376,10 +411,10 @@ impl MaterialModel {
         o: &SynthesisOptions,
     ) -> Result<SynthesisCache> {
         check(self, o)?;
-        // The first image draws every band's noise (while the range map's normals are made
+        // The first image draws every band's noise (while the range map is resampled
         // beside it); the others reuse it, in parallel.
-        let (normals, cache) = rayon::join(
-            || self.range_normals(o.rows, o.cols, o.tileable),
+        let (heights, cache) = rayon::join(
+            || self.range_heights(o.rows, o.cols, o.tileable),
             || -> Result<SynthesisCache> {
                 let cache = self.empty_cache(o, None);
                 if let Some(&first) = clusters.first() {
@@ -389,7 +424,7 @@ impl MaterialModel {
             },
         );
         let mut cache = cache?;
-        cache.normals = normals;
+        cache.heights = heights;
         clusters
             .par_iter()
             .try_for_each(|&k| self.subspace_from_cache(&cache, k).map(|_| ()))?;
@@ -443,24 +478,25 @@ impl MaterialModel {
     pub fn range_normals(&self, rows: usize, cols: usize, tileable: bool) -> Option<Array3<f64>> {
         let heights = self.range_heights(rows, cols, tileable)?;
         Some(if tileable {
-            crate::geometry::integrate::normals_of_periodic(&heights)
+            normals_of_periodic(&heights)
         } else {
-            crate::geometry::normals_of(&heights)
+            normals_of(&heights)
         })
     }
 }
 
-/// Bump mapping (mrf_math.md 1(g)): multiplies an image by `max(0, n . l) / mean(max(0, n . l))`.
+/// Bump mapping (mrf_math.md 1(g)): multiplies an image by `max(0, n . l) / mean(max(0, n . l))`
+/// for the unit normals `n` of `heights` (range-map texels, differences as `border` says).
 /// Dividing by the mean keeps the subspace image's own average shading from being applied
 /// twice. Lights so low that almost nothing is lit leave the image as it is.
-pub fn bump_relight(image: &mut Array3<f32>, normals: &Array3<f64>, light: &Direction) {
+pub fn bump_relight(
+    image: &mut Array3<f32>,
+    heights: &Array2<f64>,
+    border: NormalBorder,
+    light: &Direction,
+) {
     let l = light.vector();
-    let (_, h, w) = normals.dim();
-    let mut shade = Array2::<f64>::zeros((h, w));
-    ndarray::par_azip!((s in &mut shade, &x in &normals.index_axis(Axis(0), 0),
-        &y in &normals.index_axis(Axis(0), 1), &z in &normals.index_axis(Axis(0), 2)) {
-        *s = (x * l[0] + y * l[1] + z * l[2]).max(0.0);
-    });
+    let shade = shading(heights, border, [l[0], l[1], l[2]]);
     let mean = shade.sum() / shade.len().max(1) as f64;
     if mean < 1e-3 {
         return;

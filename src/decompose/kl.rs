@@ -3,8 +3,7 @@
 //! by its own mono-spectral MRF.
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
-use ndarray::{Array2, Array3, Axis, Zip};
-use rayon::prelude::*;
+use ndarray::{Array2, Array3, Axis, Zip, s};
 
 /// A colour mean and orthonormal basis: `factor = T^T (rgb - mean)`, `rgb = T factor + mean`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -72,22 +71,36 @@ impl KlBasis {
         })
     }
 
-    /// The image from its factor planes (all of one shape).
+    /// The image from its factor planes (all of one shape): planar (3, rows, cols).
     pub fn inverse(&self, factors: &[Array2<f64>; 3]) -> Array3<f32> {
+        self.inverse_mapped(factors, |f| f)
+    }
+
+    /// The image from its factor planes, each pixel's factor values passed through `map`
+    /// first (the synthesis's marginal matching, fused into the one pass over the pixels).
+    pub fn inverse_mapped(
+        &self,
+        factors: &[Array2<f64>; 3],
+        map: impl Fn([f64; 3]) -> [f64; 3] + Sync,
+    ) -> Array3<f32> {
         let (h, w) = factors[0].dim();
         let mut out = Array3::<f32>::zeros((3, h, w));
-        out.axis_iter_mut(Axis(0))
-            .into_par_iter()
-            .enumerate()
-            .for_each(|(c, mut channel)| {
-                let (b, mean) = (self.basis[c], self.mean[c]);
-                Zip::from(&mut channel)
-                    .and(&factors[0])
-                    .and(&factors[1])
-                    .and(&factors[2])
-                    .for_each(|o, &f0, &f1, &f2| {
-                        *o = (b[0] * f0 + b[1] * f1 + b[2] * f2 + mean) as f32;
-                    });
+        let (mut r, mut g, mut b) =
+            out.multi_slice_mut((s![0, .., ..], s![1, .., ..], s![2, .., ..]));
+        Zip::from(r.rows_mut())
+            .and(g.rows_mut())
+            .and(b.rows_mut())
+            .and(factors[0].rows())
+            .and(factors[1].rows())
+            .and(factors[2].rows())
+            .par_for_each(|mut r, mut g, mut b, f0, f1, f2| {
+                for x in 0..f0.len() {
+                    let f = map([f0[x], f1[x], f2[x]]);
+                    for (c, out) in [&mut r[x], &mut g[x], &mut b[x]].into_iter().enumerate() {
+                        let k = self.basis[c];
+                        *out = (k[0] * f[0] + k[1] * f[1] + k[2] * f[2] + self.mean[c]) as f32;
+                    }
+                }
             });
         out
     }

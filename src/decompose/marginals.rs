@@ -36,11 +36,57 @@ pub fn quantiles(plane: &Array2<f64>) -> Quantiles {
     })
 }
 
-/// Maps `plane` so that its quantiles become `target`: piecewise-linear between the knots of
-/// its own quantile table and the target's. Flat stretches of the source map to their knot.
+/// Maps `plane` so that its quantiles become `target` (see [`MarginalMap`]).
 pub fn match_marginal(plane: &mut Array2<f64>, target: &Quantiles) {
-    let source = quantiles(plane);
-    let map = |v: f64| {
+    let map = MarginalMap::new(plane, target);
+    plane.par_mapv_inplace(|v| map.apply(v));
+}
+
+/// The monotone map that gives a plane the quantiles `target`: piecewise linear between the
+/// knots of the plane's own quantile table and the target's (flat stretches of the source map
+/// to their knot). Large planes use it tabulated on a fine uniform grid over the source range,
+/// one multiply-add per value instead of a search.
+#[derive(Debug, Clone)]
+pub struct MarginalMap {
+    source: Quantiles,
+    target: Quantiles,
+    /// (lowest source value, grid steps per unit, map at the grid nodes) when tabulated.
+    table: Option<(f64, f64, Vec<f64>)>,
+}
+
+impl MarginalMap {
+    /// The map for `plane`'s values onto `target`.
+    pub fn new(plane: &Array2<f64>, target: &Quantiles) -> Self {
+        let mut map = Self {
+            source: quantiles(plane),
+            target: *target,
+            table: None,
+        };
+        let (lo, hi) = (map.source[0], map.source[QUANTILES - 1]);
+        if hi.partial_cmp(&lo) == Some(std::cmp::Ordering::Greater) && plane.len() >= 4 * LUT {
+            let step = (hi - lo) / LUT as f64;
+            let nodes = (0..=LUT).map(|i| map.exact(lo + step * i as f64)).collect();
+            map.table = Some((lo, 1.0 / step, nodes));
+        }
+        map
+    }
+
+    /// The mapped value of `v`.
+    #[inline]
+    pub fn apply(&self, v: f64) -> f64 {
+        match &self.table {
+            Some((lo, per_step, nodes)) => {
+                let x = ((v - lo) * per_step).clamp(0.0, LUT as f64);
+                // x is in 0..=LUT: the signed 32-bit conversion is exact and the cheapest.
+                let i = (x as i32 as usize).min(LUT - 1);
+                nodes[i] + (nodes[i + 1] - nodes[i]) * (x - i as f64)
+            }
+            None => self.exact(v),
+        }
+    }
+
+    fn exact(&self, v: f64) -> f64 {
+        let (source, target) = (&self.source, &self.target);
         let k = source.partition_point(|&q| q < v);
         if k == 0 {
             target[0]
@@ -51,22 +97,7 @@ pub fn match_marginal(plane: &mut Array2<f64>, target: &Quantiles) {
             let t = if b > a { (v - a) / (b - a) } else { 1.0 };
             target[k - 1] + (target[k] - target[k - 1]) * t
         }
-    };
-    let (lo, hi) = (source[0], source[QUANTILES - 1]);
-    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) || plane.len() < 4 * LUT {
-        plane.mapv_inplace(map);
-        return;
     }
-    // The map is monotone and piecewise linear: tabulate it on a fine uniform grid over the
-    // source range and interpolate, one multiply-add per pixel instead of a search.
-    let step = (hi - lo) / LUT as f64;
-    let table: Vec<f64> = (0..=LUT).map(|i| map(lo + step * i as f64)).collect();
-    let per_step = 1.0 / step;
-    plane.par_mapv_inplace(|v| {
-        let x = ((v - lo) * per_step).clamp(0.0, LUT as f64);
-        let i = (x as usize).min(LUT - 1);
-        table[i] + (table[i + 1] - table[i]) * (x - i as f64)
-    });
 }
 
 /// Entries of the tabulated marginal map (the error against the exact map is below

@@ -2,7 +2,8 @@
 //! least-squares projection of a gradient field onto integrable surfaces, computed with FFTs on
 //! the mirror-padded field (mrf_math.md 1(b)).
 
-use ndarray::{Array2, Array3, Zip, s};
+use ndarray::{Array2, Array3, s};
+use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
 
 use crate::fft;
@@ -71,49 +72,88 @@ pub fn frankot_chellappa(normals: &Array3<f64>) -> Array2<f64> {
 }
 
 /// Unit normals of a height field by central differences (x right, y up; edge samples repeated
-/// at the borders).
+/// at the borders), shape (3, rows, cols).
 pub fn normals_of(heights: &Array2<f64>) -> Array3<f64> {
-    normals_with(heights, |i, n| i.clamp(0, n as isize - 1) as usize)
+    normals(heights, Border::Clamp)
 }
 
 /// Unit normals of a periodic height field (differences wrap around the borders).
 pub fn normals_of_periodic(heights: &Array2<f64>) -> Array3<f64> {
-    normals_with(heights, |i, n| i.rem_euclid(n as isize) as usize)
+    normals(heights, Border::Wrap)
 }
 
-fn normals_with(
+/// How differences treat the borders of a height field.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Border {
+    /// Edge samples repeated ([`normals_of`]).
+    Clamp,
+    /// The field wraps around ([`normals_of_periodic`]).
+    Wrap,
+}
+
+impl Border {
+    fn index(self, i: isize, n: usize) -> usize {
+        match self {
+            Border::Clamp => i.clamp(0, n as isize - 1) as usize,
+            Border::Wrap => i.rem_euclid(n as isize) as usize,
+        }
+    }
+}
+
+fn normals(heights: &Array2<f64>, border: Border) -> Array3<f64> {
+    let (h, w) = heights.dim();
+    let interleaved = map_normals(heights, border, |n| n);
+    Array3::from_shape_vec((h, w, 3), interleaved.into_iter().flatten().collect())
+        .expect("rows x cols x 3 values")
+        .permuted_axes([2, 0, 1])
+        .as_standard_layout()
+        .into_owned()
+}
+
+/// `max(0, n . l)` for the unit normals `n` of a height field (as [`normals_of`] or
+/// [`normals_of_periodic`] make them) and the unit light vector `l`, without storing the
+/// normals; shape (rows, cols).
+pub fn shading(heights: &Array2<f64>, border: Border, l: [f64; 3]) -> Array2<f64> {
+    let values = map_normals(heights, border, |n| {
+        (n[0] * l[0] + n[1] * l[1] + n[2] * l[2]).max(0.0)
+    });
+    Array2::from_shape_vec(heights.dim(), values).expect("rows x cols values")
+}
+
+/// `f` of the unit normal at every sample, in raster order, rows in parallel.
+fn map_normals<T: Send>(
     heights: &Array2<f64>,
-    index: impl Fn(isize, usize) -> usize + Sync,
-) -> Array3<f64> {
+    border: Border,
+    f: impl Fn([f64; 3]) -> T + Sync,
+) -> Vec<T> {
     let (h, w) = heights.dim();
     let (sx, sy) = (if w > 1 { 2.0 } else { 1.0 }, if h > 1 { 2.0 } else { 1.0 });
-    let mut out = Array3::zeros((3, h, w));
-    let (mut nx, mut ny, mut nz) =
-        out.multi_slice_mut((s![0, .., ..], s![1, .., ..], s![2, .., ..]));
     // Neighbour columns, shared by every row.
     let sides: Vec<(usize, usize)> = (0..w as isize)
-        .map(|x| (index(x - 1, w), index(x + 1, w)))
+        .map(|x| (border.index(x - 1, w), border.index(x + 1, w)))
         .collect();
-    Zip::indexed(nx.rows_mut())
-        .and(ny.rows_mut())
-        .and(nz.rows_mut())
-        .par_for_each(|y, mut rx, mut ry, mut rz| {
+    let rows: Vec<Vec<T>> = (0..h)
+        .into_par_iter()
+        .map(|y| {
             let (row, up, down) = (
                 heights.row(y),
-                heights.row(index(y as isize - 1, h)),
-                heights.row(index(y as isize + 1, h)),
+                heights.row(border.index(y as isize - 1, h)),
+                heights.row(border.index(y as isize + 1, h)),
             );
-            for (x, &(left, right)) in sides.iter().enumerate() {
-                let dx = (row[right] - row[left]) / sx;
-                let dr = (down[x] - up[x]) / sy;
-                // y is up: dh/dy = -dh/drow.
-                let len = (dx * dx + dr * dr + 1.0).sqrt();
-                rx[x] = -dx / len;
-                ry[x] = dr / len;
-                rz[x] = 1.0 / len;
-            }
-        });
-    out
+            sides
+                .iter()
+                .enumerate()
+                .map(|(x, &(left, right))| {
+                    let dx = (row[right] - row[left]) / sx;
+                    let dr = (down[x] - up[x]) / sy;
+                    // y is up: dh/dy = -dh/drow.
+                    let len = (dx * dx + dr * dr + 1.0).sqrt();
+                    f([-dx / len, dr / len, 1.0 / len])
+                })
+                .collect()
+        })
+        .collect();
+    rows.into_iter().flatten().collect()
 }
 
 #[cfg(test)]
