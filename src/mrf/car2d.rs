@@ -321,17 +321,14 @@ impl Car2dModel {
         let inner = width - 2 * pad;
         for (r, noise_row) in (pad..height).zip(noise.chunks_exact(inner)) {
             let (before, rest) = y.split_at_mut(r * width);
-            let row = &mut rest[pad..width - pad];
-            for (v, &e) in row.iter_mut().zip(noise_row) {
-                *v = sigma * e;
-            }
-            for &(g, s1, s2) in &earlier {
-                let start = ((r - s1) * width + pad) as isize - s2;
-                let src = &before[start as usize..start as usize + inner];
-                for (v, &p) in row.iter_mut().zip(src) {
-                    *v += g * p;
-                }
-            }
+            let sources: Vec<(f64, &[f64])> = earlier
+                .iter()
+                .map(|&(g, s1, s2)| {
+                    let start = (((r - s1) * width + pad) as isize - s2) as usize;
+                    (g, &before[start..start + inner])
+                })
+                .collect();
+            earlier_terms(&mut rest[pad..width - pad], noise_row, sigma, &sources);
             if has_in_row {
                 recurse_in_row(&mut rest[..width - pad], pad, in_row);
             }
@@ -340,6 +337,31 @@ impl Car2dModel {
         let first = pad + MARGIN;
         y.slice(s![first.., first..first + cols])
             .mapv(|v| v + self.mean)
+    }
+}
+
+/// A row's noise and its terms from earlier rows: `row[c] = sigma e[c] + sum_k g_k src_k[c]`,
+/// in blocks of 8 columns kept in registers (one store per value instead of one per term).
+fn earlier_terms(row: &mut [f64], noise: &[f64], sigma: f64, sources: &[(f64, &[f64])]) {
+    const BLOCK: usize = 8;
+    let mut start = 0;
+    for (out, e) in row.chunks_exact_mut(BLOCK).zip(noise.chunks_exact(BLOCK)) {
+        let mut acc: [f64; BLOCK] = std::array::from_fn(|j| sigma * e[j]);
+        for &(g, src) in sources {
+            let src = &src[start..start + BLOCK];
+            for j in 0..BLOCK {
+                acc[j] += g * src[j];
+            }
+        }
+        out.copy_from_slice(&acc);
+        start += BLOCK;
+    }
+    for c in start..row.len() {
+        let mut acc = sigma * noise[c];
+        for &(g, src) in sources {
+            acc += g * src[c];
+        }
+        row[c] = acc;
     }
 }
 
