@@ -235,13 +235,24 @@ impl GmrfModel {
                 *sum_c += g * cos;
             }
         }
-        let mut mu = Array2::from_elem((cols, rows), 1.0);
-        for (s1, sines, cosines) in &groups {
-            let row_angles: SinCos = angles(rows, *s1).collect();
-            for ((mut column, &gs), &gc) in mu.rows_mut().into_iter().zip(sines).zip(cosines) {
-                for (m, &(sin, cos)) in column.iter_mut().zip(&row_angles) {
-                    *m -= 2.0 * (cos * gc - sin * gs);
+        let row_angles: Vec<SinCos> = groups.iter().map(|g| angles(rows, g.0).collect()).collect();
+        let mut mu = Array2::zeros((cols, rows));
+        for (k2, mut column) in mu.rows_mut().into_iter().enumerate() {
+            // The s1 = 0 group (cosine 1, sine 0 along the rows) is a constant per column.
+            let mut base = 1.0;
+            let mut terms: Vec<(&SinCos, f64, f64)> = Vec::with_capacity(groups.len());
+            for ((s1, sines, cosines), angles) in groups.iter().zip(&row_angles) {
+                if *s1 == 0 {
+                    base -= 2.0 * cosines[k2];
+                } else {
+                    terms.push((angles, 2.0 * cosines[k2], 2.0 * sines[k2]));
                 }
+            }
+            for (k1, m) in column.iter_mut().enumerate() {
+                *m = terms.iter().fold(base, |acc, &(angles, gc, gs)| {
+                    let (sin, cos) = angles[k1];
+                    acc - (cos * gc - sin * gs)
+                });
             }
         }
         mu
@@ -302,14 +313,14 @@ impl GmrfModel {
         // unit power per bin) instead of transforming a real noise field: one FFT instead of
         // two. The real part of the inverse transform, scaled by sqrt(2 M N), has exactly the
         // model's covariance (1/MN) sum_k S_k cos(omega_k . lag).
-        let half = std::f64::consts::FRAC_1_SQRT_2;
-        let sigma2 = self.sigma2.max(0.0);
+        // Amplitudes in single precision, as the transform runs: sqrt(sigma^2 / (2 mu)).
+        let half_sigma2 = (0.5 * self.sigma2.max(0.0)) as f32;
         let spectrum: Vec<Complex32> = mu
             .iter()
             .zip(noise.chunks_exact(2))
-            .map(|(m, w)| {
-                let amplitude = half * (sigma2 / m).sqrt();
-                Complex32::new((w[0] * amplitude) as f32, (w[1] * amplitude) as f32)
+            .map(|(&m, w)| {
+                let amplitude = (half_sigma2 / m as f32).sqrt();
+                Complex32::new(w[0] as f32 * amplitude, w[1] as f32 * amplitude)
             })
             .collect();
         let scale = (2.0 * (rows * cols) as f64).sqrt();
