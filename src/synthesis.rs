@@ -57,7 +57,7 @@ pub struct SynthesisCache {
 /// subspace image draws it and lets it go.
 #[derive(Debug)]
 struct NoiseBank {
-    kept: Option<Mutex<HashMap<u64, Arc<Vec<f64>>>>>,
+    kept: Option<Mutex<HashMap<u64, Arc<Vec<f32>>>>>,
 }
 
 impl NoiseBank {
@@ -74,7 +74,7 @@ impl NoiseBank {
     /// At least `len` unit Gaussian values for band `seed` (a longer draw from the same seed
     /// starts with the same values, so one kept draw serves every shorter request). No lock is
     /// held while drawing: concurrent first requests may both draw, and get the same values.
-    fn draw(&self, seed: u64, len: usize) -> Arc<Vec<f64>> {
+    fn draw(&self, seed: u64, len: usize) -> Arc<Vec<f32>> {
         let Some(kept) = &self.kept else {
             return Arc::new(standard_normal(seed, len));
         };
@@ -338,16 +338,22 @@ impl MaterialModel {
     /// An invalid size.
     pub fn synthesis_cache(&self, o: &SynthesisOptions) -> Result<SynthesisCache> {
         check(self, o)?;
-        Ok(self.empty_cache(o, self.range_heights(o.rows, o.cols, o.tileable)))
+        let heights = self.range_heights(o.rows, o.cols, o.tileable);
+        Ok(self.empty_cache(o, heights, NoiseBank::kept()))
     }
 
-    fn empty_cache(&self, o: &SynthesisOptions, heights: Option<Array2<f64>>) -> SynthesisCache {
+    fn empty_cache(
+        &self,
+        o: &SynthesisOptions,
+        heights: Option<Array2<f64>>,
+        noise: NoiseBank,
+    ) -> SynthesisCache {
         SynthesisCache {
             options: *o,
             subspaces: (0..self.subspaces.len()).map(|_| OnceLock::new()).collect(),
             heights,
             normals: OnceLock::new(),
-            noise: NoiseBank::kept(),
+            noise,
         }
     }
 
@@ -416,7 +422,14 @@ impl MaterialModel {
         let (heights, cache) = rayon::join(
             || self.range_heights(o.rows, o.cols, o.tileable),
             || -> Result<SynthesisCache> {
-                let cache = self.empty_cache(o, None);
+                // One image alone draws its noise and lets it go (at 4096^2 a GMRF's noise
+                // is over 500 MB); more than one keep it to share.
+                let noise = if clusters.len() > 1 {
+                    NoiseBank::kept()
+                } else {
+                    NoiseBank::transient()
+                };
+                let cache = self.empty_cache(o, None, noise);
                 if let Some(&first) = clusters.first() {
                     self.subspace_from_cache(&cache, first)?;
                 }

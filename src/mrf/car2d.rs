@@ -262,7 +262,7 @@ impl Car2dModel {
         &self,
         rows: usize,
         cols: usize,
-        noise: &[f64],
+        noise: &[f32],
         tileable: bool,
     ) -> Array2<f64> {
         let offsets = causal(self.order as usize);
@@ -282,7 +282,7 @@ impl Car2dModel {
                 let mut change = 0.0f64;
                 for r in 0..rows {
                     for c in 0..cols {
-                        let mut acc = sigma * noise[r * cols + c];
+                        let mut acc = sigma * f64::from(noise[r * cols + c]);
                         for (g, &(s1, s2)) in self.gamma.iter().zip(offsets) {
                             let rr = (r as isize - s1).rem_euclid(rows as isize) as usize;
                             let cc = (c as isize - s2).rem_euclid(cols as isize) as usize;
@@ -342,11 +342,11 @@ impl Car2dModel {
 
 /// A row's noise and its terms from earlier rows: `row[c] = sigma e[c] + sum_k g_k src_k[c]`,
 /// in blocks of 8 columns kept in registers (one store per value instead of one per term).
-fn earlier_terms(row: &mut [f64], noise: &[f64], sigma: f64, sources: &[(f64, &[f64])]) {
+fn earlier_terms(row: &mut [f64], noise: &[f32], sigma: f64, sources: &[(f64, &[f64])]) {
     const BLOCK: usize = 8;
     let mut start = 0;
     for (out, e) in row.chunks_exact_mut(BLOCK).zip(noise.chunks_exact(BLOCK)) {
-        let mut acc: [f64; BLOCK] = std::array::from_fn(|j| sigma * e[j]);
+        let mut acc: [f64; BLOCK] = std::array::from_fn(|j| sigma * f64::from(e[j]));
         for &(g, src) in sources {
             let src = &src[start..start + BLOCK];
             for j in 0..BLOCK {
@@ -357,7 +357,7 @@ fn earlier_terms(row: &mut [f64], noise: &[f64], sigma: f64, sources: &[(f64, &[
         start += BLOCK;
     }
     for c in start..row.len() {
-        let mut acc = sigma * noise[c];
+        let mut acc = sigma * f64::from(noise[c]);
         for &(g, src) in sources {
             acc += g * src[c];
         }

@@ -280,7 +280,7 @@ impl Car3dModel {
         &self,
         rows: usize,
         cols: usize,
-        noise: &[f64],
+        noise: &[f32],
         tileable: bool,
     ) -> Array3<f64> {
         let needed = Self::noise_len(rows, cols, tileable);
@@ -295,7 +295,7 @@ impl Car3dModel {
         let mut draws = noise.chunks_exact(3);
         let mut innovation = || -> [f64; 3] {
             let w = draws.next().expect("length checked");
-            std::array::from_fn(|p| (0..=p).map(|q| l[(p, q)] * w[q]).sum())
+            std::array::from_fn(|p| (0..=p).map(|q| l[(p, q)] * f64::from(w[q])).sum())
         };
         let apply = |acc: &mut [f64; 3], ak: &Matrix3<f64>, prev: [f64; 3]| {
             for p in 0..3 {

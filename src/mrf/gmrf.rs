@@ -296,7 +296,7 @@ impl GmrfModel {
     ///
     /// # Panics
     /// If `noise` is shorter than [`GmrfModel::noise_len`].
-    pub fn synthesize_from(&self, rows: usize, cols: usize, noise: &[f64]) -> Array2<f64> {
+    pub fn synthesize_from(&self, rows: usize, cols: usize, noise: &[f32]) -> Array2<f64> {
         let needed = Self::noise_len(rows, cols);
         assert!(
             noise.len() >= needed,
@@ -320,7 +320,7 @@ impl GmrfModel {
             .zip(noise.chunks_exact(2))
             .map(|(&m, w)| {
                 let amplitude = (half_sigma2 / m as f32).sqrt();
-                Complex32::new(w[0] as f32 * amplitude, w[1] as f32 * amplitude)
+                Complex32::new(w[0] * amplitude, w[1] * amplitude)
             })
             .collect();
         let scale = (2.0 * (rows * cols) as f64).sqrt();
