@@ -93,14 +93,17 @@ impl KlBasis {
             .and(factors[0].rows())
             .and(factors[1].rows())
             .and(factors[2].rows())
-            .par_for_each(|mut r, mut g, mut b, f0, f1, f2| {
-                for x in 0..f0.len() {
-                    let f = map([f0[x], f1[x], f2[x]]);
-                    for (c, out) in [&mut r[x], &mut g[x], &mut b[x]].into_iter().enumerate() {
-                        let k = self.basis[c];
-                        *out = (k[0] * f[0] + k[1] * f[1] + k[2] * f[2] + self.mean[c]) as f32;
-                    }
-                }
+            .par_for_each(|r, g, b, f0, f1, f2| {
+                let (k, mean) = (&self.basis, &self.mean);
+                Zip::from(r).and(g).and(b).and(f0).and(f1).and(f2).for_each(
+                    |r, g, b, &f0, &f1, &f2| {
+                        let f = map([f0, f1, f2]);
+                        let channel = |c: usize| {
+                            (k[c][0] * f[0] + k[c][1] * f[1] + k[c][2] * f[2] + mean[c]) as f32
+                        };
+                        (*r, *g, *b) = (channel(0), channel(1), channel(2));
+                    },
+                );
             });
         out
     }
