@@ -36,7 +36,8 @@ pub struct SynthesisOptions {
     pub cols: usize,
     /// Seed of the driving noise: same seed, same bytes.
     pub seed: u64,
-    /// Make the output tile seamlessly (exact for GMRF; two-pass toroidal for CAR models).
+    /// Make the output tile seamlessly (every model is then sampled exactly on the torus: by
+    /// FFT for the GMRF, by Gauss-Seidel sweeps for the CAR models).
     /// Needs sizes divisible by `2^(levels - 1)`.
     pub tileable: bool,
 }

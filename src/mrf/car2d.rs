@@ -2,7 +2,8 @@
 //! mrf_math.md sec. 2): `Y_r = gamma X_r + e_r`, `X_r` the causal neighbours, `e_r` white
 //! Gaussian noise. Parameters and noise variance have analytic Bayesian estimates; the
 //! neighbourhood is chosen by the Bayesian decision rule over the causal hierarchy; synthesis is
-//! the causal recursion with a burn-in margin, or a two-pass toroidal variant that tiles.
+//! the causal recursion with a burn-in margin, or the exact toroidal field (which tiles) by
+//! Gauss-Seidel sweeps.
 
 use super::neighbourhood::{MAX_ORDER, causal, reach};
 use super::noise::standard_normal;
