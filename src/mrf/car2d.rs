@@ -6,7 +6,7 @@
 //! Gauss-Seidel sweeps.
 
 use super::neighbourhood::{MAX_ORDER, causal, reach};
-use super::noise::standard_normal;
+use super::noise::{require, standard_normal};
 use super::{Car2dFit, choose_stable, is_flat};
 use nalgebra::{DMatrix, DVector};
 use ndarray::{Array2, ArrayView2, s};
@@ -269,11 +269,7 @@ impl Car2dModel {
         let offsets = causal(self.order as usize);
         let sigma = self.sigma2.max(0.0).sqrt();
         let needed = Self::noise_len(rows, cols, tileable);
-        assert!(
-            noise.len() >= needed,
-            "{} noise values for {needed}",
-            noise.len()
-        );
+        require(noise, needed);
         if needed == 0 {
             return Array2::zeros((rows, cols));
         }

@@ -6,7 +6,7 @@
 use super::Car2dModel;
 use super::car2d::{MARGIN, bounded_sample, solve_on_torus};
 use super::neighbourhood::{causal, reach};
-use super::noise::standard_normal;
+use super::noise::{require, standard_normal};
 use super::{Car3dFit, choose_stable, is_flat};
 use nalgebra::{DMatrix, Matrix3};
 use ndarray::Array3;
@@ -284,11 +284,7 @@ impl Car3dModel {
         tileable: bool,
     ) -> Array3<f64> {
         let needed = Self::noise_len(rows, cols, tileable);
-        assert!(
-            noise.len() >= needed,
-            "{} noise values for {needed}",
-            noise.len()
-        );
+        require(noise, needed);
         let offsets = causal(self.order as usize);
         let l = self.noise_factor();
         let a: Vec<Matrix3<f64>> = (0..offsets.len()).map(|k| self.a_matrix(k)).collect();

@@ -9,7 +9,7 @@ use ndarray::Array2;
 use rustfft::num_complex::Complex32;
 
 use super::neighbourhood::{MAX_ORDER, causal};
-use super::noise::standard_normal;
+use super::noise::{require, standard_normal};
 use super::{GmrfFit, is_flat};
 use crate::fft;
 
@@ -298,11 +298,7 @@ impl GmrfModel {
     /// If `noise` is shorter than [`GmrfModel::noise_len`].
     pub fn synthesize_from(&self, rows: usize, cols: usize, noise: &[f32]) -> Array2<f64> {
         let needed = Self::noise_len(rows, cols);
-        assert!(
-            noise.len() >= needed,
-            "{} noise values for {needed}",
-            noise.len()
-        );
+        require(noise, needed);
         if rows == 0 || cols == 0 {
             return Array2::zeros((rows, cols));
         }

@@ -36,6 +36,16 @@ pub fn standard_normal(seed: u64, len: usize) -> Vec<f32> {
     out
 }
 
+/// Panics unless `noise` holds at least `needed` values: a synthesizer was handed a draw for a
+/// smaller sample (a programming error, never user input).
+pub(crate) fn require(noise: &[f32], needed: usize) {
+    assert!(
+        noise.len() >= needed,
+        "{} noise values for {needed}",
+        noise.len()
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
