@@ -486,17 +486,6 @@ impl MaterialModel {
             &taps(cols, map.cols),
         ))
     }
-
-    /// Unit normals of [`MaterialModel::range_heights`], shape (3, rows, cols); differences
-    /// wrap around the borders when `tileable`.
-    pub fn range_normals(&self, rows: usize, cols: usize, tileable: bool) -> Option<Array3<f64>> {
-        let heights = self.range_heights(rows, cols, tileable)?;
-        Some(if tileable {
-            normals_of_periodic(&heights)
-        } else {
-            normals_of(&heights)
-        })
-    }
 }
 
 /// Bump mapping (mrf_math.md 1(g)): multiplies an image by `max(0, n . l) / mean(max(0, n . l))`
