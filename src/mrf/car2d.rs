@@ -362,16 +362,32 @@ fn earlier_terms(row: &mut [f64], noise: &[f32], sigma: f64, sources: &[(f64, &[
     }
 }
 
-/// The in-row part of the causal recursion: `row[c] += g[2] y[c-3] + g[1] y[c-2] + g[0] y[c-1]`
-/// for `c` from `start` on, left to right, with the last three outputs kept in registers
-/// (absent neighbours have a zero coefficient). The left neighbour is added last, so the
-/// loop-carried chain is one multiply and one add.
+/// The in-row part of the causal recursion: `y[c] = a[c] + g[0] y[c-1] + g[1] y[c-2] +
+/// g[2] y[c-3]` for `c` from `start` on, where `row` holds `a` (noise plus the terms from
+/// earlier rows) on entry and `y` on exit; absent neighbours have a zero coefficient.
+///
+/// Substituting the recursion for `y[c-1]` once gives
+/// `y[c] = a[c] + g0 a[c-1] + (g1 + g0^2) y[c-2] + (g2 + g0 g1) y[c-3] + g0 g2 y[c-4]`,
+/// in which no output depends on the one just before it: two chains of multiply-adds
+/// interleave, and the loop runs at about twice the speed of the plain recursion (same model;
+/// the rounding differs in the last bits).
 fn recurse_in_row(row: &mut [f64], start: usize, g: [f64; 3]) {
-    let (mut y1, mut y2, mut y3) = (row[start - 1], row[start - 2], row[start - 3]);
-    for v in &mut row[start..] {
-        let y = *v + g[2] * y3 + g[1] * y2 + g[0] * y1;
+    if start >= row.len() {
+        return;
+    }
+    let h = [g[1] + g[0] * g[0], g[2] + g[0] * g[1], g[0] * g[2]];
+    let (y2, y3, y4) = (row[start - 1], row[start - 2], row[start - 3]);
+    // The first output the plain way: the one before it is a border value, not an output.
+    let first = row[start] + g[2] * y4 + g[1] * y3 + g[0] * y2;
+    let mut a_prev = row[start];
+    row[start] = first;
+    let (mut y1, mut y2, mut y3, mut y4) = (first, y2, y3, y4);
+    for v in &mut row[start + 1..] {
+        let a = *v;
+        let y = a + g[0] * a_prev + h[2] * y4 + h[1] * y3 + h[0] * y2;
         *v = y;
-        (y3, y2, y1) = (y2, y1, y);
+        a_prev = a;
+        (y4, y3, y2, y1) = (y3, y2, y1, y);
     }
 }
 
@@ -440,6 +456,31 @@ mod tests {
         );
         let corr = correlation(&a, &b);
         assert!(corr > 0.8, "{corr}");
+    }
+
+    #[test]
+    fn the_look_ahead_in_row_recursion_equals_the_plain_one() {
+        let g = [0.45, -0.2, 0.15];
+        let start = 3;
+        let mut row: Vec<f64> = (0..200)
+            .map(|i| {
+                if i < start {
+                    0.0
+                } else {
+                    ((i * 37 % 11) as f64 - 5.0) * 0.3
+                }
+            })
+            .collect();
+        let mut plain = row.clone();
+        for c in start..plain.len() {
+            plain[c] += g[2] * plain[c - 3] + g[1] * plain[c - 2] + g[0] * plain[c - 1];
+        }
+        recurse_in_row(&mut row, start, g);
+        for (a, b) in row.iter().zip(&plain) {
+            assert!((a - b).abs() < 1e-12 * (1.0 + b.abs()), "{a} vs {b}");
+        }
+        // Rows no longer than the border are left alone.
+        recurse_in_row(&mut [0.0; 3], start, g);
     }
 
     #[test]
