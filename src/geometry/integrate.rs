@@ -103,7 +103,7 @@ impl Border {
 fn normals(heights: &Array2<f64>, border: Border) -> Array3<f64> {
     let (h, w) = heights.dim();
     let interleaved = map_normals(heights, border, |n| n);
-    Array3::from_shape_vec((h, w, 3), interleaved.into_iter().flatten().collect())
+    Array3::from_shape_vec((h, w, 3), interleaved.concat())
         .expect("rows x cols x 3 values")
         .permuted_axes([2, 0, 1])
         .as_standard_layout()
@@ -121,7 +121,7 @@ pub fn shading(heights: &Array2<f64>, border: Border, l: [f64; 3]) -> Array2<f64
 }
 
 /// `f` of the unit normal at every sample, in raster order, rows in parallel.
-fn map_normals<T: Send>(
+fn map_normals<T: Send + Copy + Default>(
     heights: &Array2<f64>,
     border: Border,
     f: impl Fn([f64; 3]) -> T + Sync,
@@ -132,28 +132,25 @@ fn map_normals<T: Send>(
     let sides: Vec<(usize, usize)> = (0..w as isize)
         .map(|x| (border.index(x - 1, w), border.index(x + 1, w)))
         .collect();
-    let rows: Vec<Vec<T>> = (0..h)
-        .into_par_iter()
-        .map(|y| {
-            let (row, up, down) = (
-                heights.row(y),
-                heights.row(border.index(y as isize - 1, h)),
-                heights.row(border.index(y as isize + 1, h)),
-            );
-            sides
-                .iter()
-                .enumerate()
-                .map(|(x, &(left, right))| {
-                    let dx = (row[right] - row[left]) / sx;
-                    let dr = (down[x] - up[x]) / sy;
-                    // y is up: dh/dy = -dh/drow.
-                    let len = (dx * dx + dr * dr + 1.0).sqrt();
-                    f([-dx / len, dr / len, 1.0 / len])
-                })
-                .collect()
-        })
-        .collect();
-    rows.into_iter().flatten().collect()
+    let mut out = vec![T::default(); h * w];
+    if w == 0 {
+        return out;
+    }
+    out.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+        let (row, up, down) = (
+            heights.row(y),
+            heights.row(border.index(y as isize - 1, h)),
+            heights.row(border.index(y as isize + 1, h)),
+        );
+        for ((x, &(left, right)), o) in sides.iter().enumerate().zip(out) {
+            let dx = (row[right] - row[left]) / sx;
+            let dr = (down[x] - up[x]) / sy;
+            // y is up: dh/dy = -dh/drow.
+            let len = (dx * dx + dr * dr + 1.0).sqrt();
+            *o = f([-dx / len, dr / len, 1.0 / len]);
+        }
+    });
+    out
 }
 
 #[cfg(test)]

@@ -135,6 +135,18 @@ fn orthonormalise(v: &[f64], previous: &[f32], d: usize) -> Option<Vec<f64>> {
 
 /// Symmetric eigen decomposition in f64 of a square f32 matrix (symmetrised); eigenvalues
 /// descending with their eigenvectors as columns.
+/// Eigenvectors (columns of `vectors`) divided by the square roots of their eigenvalues; a
+/// column with a non-positive eigenvalue becomes zero.
+fn inverse_sqrt_scaled(vectors: &Mat<f64>, values: &[f64]) -> Mat<f32> {
+    Mat::<f32>::from_fn(vectors.nrows(), values.len(), |i, j| {
+        if values[j] > 0.0 {
+            (vectors[(i, j)] / values[j].sqrt()) as f32
+        } else {
+            0.0
+        }
+    })
+}
+
 fn top_eigen(a: &Mat<f32>, k: usize, par: Par) -> Result<(Vec<f64>, Mat<f64>)> {
     use faer::dyn_stack::{MemBuffer, MemStack};
     use faer::linalg::evd::{ComputeEigenvectors, self_adjoint_evd, self_adjoint_evd_scratch};
@@ -169,13 +181,7 @@ fn gram_route(y: MatRef<'_, f32>, c: usize, par: Par) -> Result<(Mat<f32>, Vec<f
     matmul(g.as_mut(), Accum::Replace, y, y.transpose(), 1.0f32, par);
     let (values, u) = top_eigen(&g, c, par)?;
     let k = values.len();
-    let scaled = Mat::<f32>::from_fn(n, k, |i, j| {
-        if values[j] > 0.0 {
-            (u[(i, j)] / values[j].sqrt()) as f32
-        } else {
-            0.0
-        }
-    });
+    let scaled = inverse_sqrt_scaled(&u, &values);
     let mut dirs = Mat::<f32>::zeros(y.ncols(), k);
     matmul(
         dirs.as_mut(),
@@ -260,13 +266,7 @@ fn randomized_route(
     );
     let (values, w) = top_eigen(&small, c, par)?;
     let k = values.len();
-    let scaled = Mat::<f32>::from_fn(l, k, |i, j| {
-        if values[j] > 0.0 {
-            (w[(i, j)] / values[j].sqrt()) as f32
-        } else {
-            0.0
-        }
-    });
+    let scaled = inverse_sqrt_scaled(&w, &values);
     let mut dirs = Mat::<f32>::zeros(d, k);
     matmul(
         dirs.as_mut(),

@@ -309,7 +309,8 @@ impl Car2dModel {
         let mut has_in_row = false;
         for (&g, &(s1, s2)) in self.gamma.iter().zip(offsets) {
             if s1 > 0 {
-                earlier.push((g, s1 as usize, s2));
+                // How far back in the flat field the neighbour lies (s2 < 0: to the right).
+                earlier.push((g, (s1 * width as isize + s2) as usize));
             } else {
                 in_row[s2 as usize - 1] = g;
                 has_in_row = true;
@@ -318,14 +319,14 @@ impl Car2dModel {
         let inner = width - 2 * pad;
         for (r, noise_row) in (pad..height).zip(noise.chunks_exact(inner)) {
             let (before, rest) = y.split_at_mut(r * width);
-            let sources: Vec<(f64, &[f64])> = earlier
-                .iter()
-                .map(|&(g, s1, s2)| {
-                    let start = (((r - s1) * width + pad) as isize - s2) as usize;
-                    (g, &before[start..start + inner])
-                })
-                .collect();
-            earlier_terms(&mut rest[pad..width - pad], noise_row, sigma, &sources);
+            earlier_terms(
+                &mut rest[pad..width - pad],
+                noise_row,
+                sigma,
+                before,
+                r * width + pad,
+                &earlier,
+            );
             if has_in_row {
                 recurse_in_row(&mut rest[..width - pad], pad, in_row);
             }
@@ -337,15 +338,24 @@ impl Car2dModel {
     }
 }
 
-/// A row's noise and its terms from earlier rows: `row[c] = sigma e[c] + sum_k g_k src_k[c]`,
-/// in blocks of 8 columns kept in registers (one store per value instead of one per term).
-fn earlier_terms(row: &mut [f64], noise: &[f32], sigma: f64, sources: &[(f64, &[f64])]) {
+/// A row's noise and its terms from earlier rows: `row[c] = sigma e[c] + sum_k g_k y[at + c -
+/// back_k]` for `(g_k, back_k)` in `earlier`, `y` the field above the row (`before`) and `at`
+/// the row's first index in it; in blocks of 8 columns kept in registers (one store per value
+/// instead of one per term).
+fn earlier_terms(
+    row: &mut [f64],
+    noise: &[f32],
+    sigma: f64,
+    before: &[f64],
+    at: usize,
+    earlier: &[(f64, usize)],
+) {
     const BLOCK: usize = 8;
     let mut start = 0;
     for (out, e) in row.chunks_exact_mut(BLOCK).zip(noise.chunks_exact(BLOCK)) {
         let mut acc: [f64; BLOCK] = std::array::from_fn(|j| sigma * f64::from(e[j]));
-        for &(g, src) in sources {
-            let src = &src[start..start + BLOCK];
+        for &(g, back) in earlier {
+            let src = &before[at - back + start..][..BLOCK];
             for j in 0..BLOCK {
                 acc[j] += g * src[j];
             }
@@ -355,8 +365,8 @@ fn earlier_terms(row: &mut [f64], noise: &[f32], sigma: f64, sources: &[(f64, &[
     }
     for c in start..row.len() {
         let mut acc = sigma * f64::from(noise[c]);
-        for &(g, src) in sources {
-            acc += g * src[c];
+        for &(g, back) in earlier {
+            acc += g * before[at - back + c];
         }
         row[c] = acc;
     }

@@ -215,44 +215,38 @@ impl GmrfModel {
         let angles = |n: usize, s: isize| {
             (0..n).map(move |k| (tau * k as f64 * s as f64 / n as f64).sin_cos())
         };
-        // Per row offset s1: (s1, sum_s2 gamma sin(omega2 s2), sum_s2 gamma cos(omega2 s2)).
-        let mut groups: Vec<(isize, Vec<f64>, Vec<f64>)> = Vec::new();
+        // Per row offset s1 (0..=3, the reach of the causal hierarchy), made when it occurs: the
+        // column tables 2 sum_s2 gamma cos(omega2 s2) and 2 sum_s2 gamma sin(omega2 s2).
+        let mut groups: [Option<(Vec<f64>, Vec<f64>)>; 4] = Default::default();
         for (&(s1, s2), &g) in causal(self.order as usize).iter().zip(&self.gamma) {
-            let at = match groups.iter().position(|group| group.0 == s1) {
-                Some(at) => at,
-                None => {
-                    groups.push((s1, vec![0.0; cols], vec![0.0; cols]));
-                    groups.len() - 1
-                }
-            };
-            let (_, sines, cosines) = &mut groups[at];
-            for ((sum_s, sum_c), (sin, cos)) in sines
+            let (cosines, sines) =
+                groups[s1 as usize].get_or_insert_with(|| (vec![0.0; cols], vec![0.0; cols]));
+            for ((sum_c, sum_s), (sin, cos)) in cosines
                 .iter_mut()
-                .zip(cosines.iter_mut())
+                .zip(sines.iter_mut())
                 .zip(angles(cols, s2))
             {
-                *sum_s += g * sin;
-                *sum_c += g * cos;
+                *sum_c += 2.0 * g * cos;
+                *sum_s += 2.0 * g * sin;
             }
         }
-        let row_angles: Vec<SinCos> = groups.iter().map(|g| angles(rows, g.0).collect()).collect();
+        // s1 = 0 has cosine 1 and sine 0 along the rows: a constant per column.
+        let constant = groups[0].take().map(|(cosines, _)| cosines);
+        let shifted: Vec<(SinCos, Vec<f64>, Vec<f64>)> = groups
+            .into_iter()
+            .enumerate()
+            .filter_map(|(s1, group)| {
+                group.map(|(cosines, sines)| (angles(rows, s1 as isize).collect(), cosines, sines))
+            })
+            .collect();
         let mut mu = Array2::zeros((cols, rows));
         for (k2, mut column) in mu.rows_mut().into_iter().enumerate() {
-            // The s1 = 0 group (cosine 1, sine 0 along the rows) is a constant per column.
-            let mut base = 1.0;
-            let mut terms: Vec<(&SinCos, f64, f64)> = Vec::with_capacity(groups.len());
-            for ((s1, sines, cosines), angles) in groups.iter().zip(&row_angles) {
-                if *s1 == 0 {
-                    base -= 2.0 * cosines[k2];
-                } else {
-                    terms.push((angles, 2.0 * cosines[k2], 2.0 * sines[k2]));
+            column.fill(1.0 - constant.as_ref().map_or(0.0, |c| c[k2]));
+            for (row_angles, cosines, sines) in &shifted {
+                let (gc, gs) = (cosines[k2], sines[k2]);
+                for (m, &(sin, cos)) in column.iter_mut().zip(row_angles) {
+                    *m -= cos * gc - sin * gs;
                 }
-            }
-            for (k1, m) in column.iter_mut().enumerate() {
-                *m = terms.iter().fold(base, |acc, &(angles, gc, gs)| {
-                    let (sin, cos) = angles[k1];
-                    acc - (cos * gc - sin * gs)
-                });
             }
         }
         mu
