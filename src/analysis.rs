@@ -8,6 +8,7 @@ use rayon::prelude::*;
 use crate::btf::Btf;
 use crate::decompose::marginals::{self, Quantiles};
 use crate::decompose::pyramid::auto_levels;
+use crate::decompose::stationarity::{NON_STATIONARY_SHARE, block_mean_share};
 use crate::decompose::{ClusterOptions, KlBasis, Pyramid, SubspaceClustering};
 use crate::geometry;
 use crate::model::{
@@ -59,6 +60,8 @@ impl Default for AnalysisOptions {
 pub struct AnalysisReport {
     /// Every repair of an unstable or invalid band estimate, with where it happened.
     pub repairs: Vec<String>,
+    /// Doubts about the input that do not stop the analysis (e.g. not a stationary texture).
+    pub warnings: Vec<String>,
 }
 
 /// Fits a material model to `btf`.
@@ -136,6 +139,9 @@ pub fn analyze(
         .collect::<Result<_>>()?;
     progress.finish();
     let mut report = AnalysisReport::default();
+    report
+        .warnings
+        .extend(stationarity_warning(btf, &clustering.representatives)?);
     let range_map = if options.range_map {
         match estimate_range_map(btf, progress) {
             Ok(map) => Some(map),
@@ -163,6 +169,28 @@ pub fn analyze(
         range_map,
     };
     Ok((model, report))
+}
+
+/// A warning when the subspace images do not look like a stationary texture (the median of
+/// their [`block_mean_share`] above [`NON_STATIONARY_SHARE`]): their enlargement repeats the
+/// content, which is rarely what a user wants from an object or a painting.
+fn stationarity_warning(btf: &Btf, representatives: &[(usize, usize)]) -> Result<Option<String>> {
+    let mut shares: Vec<f64> = representatives
+        .par_iter()
+        .map(|&(v, l)| Ok(block_mean_share(&btf.image(v, l)?)))
+        .collect::<Result<_>>()?;
+    shares.sort_by(f64::total_cmp);
+    let Some(&median) = shares.get(shares.len() / 2) else {
+        return Ok(None);
+    };
+    Ok((median > NON_STATIONARY_SHARE).then(|| {
+        format!(
+            "the input does not look like a stationary texture: {:.0} % of its luminance \
+             variance lies in the means of a 4x4 grid of blocks (textures: a few %); an object, \
+             a painting or one large motif is repeated as wallpaper when enlarged",
+            100.0 * median
+        )
+    }))
 }
 
 /// Photometric stereo on the frontal view, Frankot-Chellappa integration, and averaging down to

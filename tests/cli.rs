@@ -177,3 +177,71 @@ fn help_teaches() {
         assert!(generate.contains(word), "{generate}");
     }
 }
+
+/// Issue 13 item 8: an object on a background (the lion-head relief) is analysed, with a
+/// warning that it is not a stationary texture; a texture gets no such warning. An oblique
+/// view of a single-view model is synthesized with a warning that it is extrapolated.
+#[test]
+fn analyze_warns_when_the_input_is_not_a_stationary_texture() {
+    let dir = temp();
+    let run = |btf: &str, out: &str| {
+        let out = btfmrf(&[
+            "analyze",
+            btf,
+            "--clusters",
+            "4",
+            "--json",
+            "--out",
+            s(&dir.path().join(out)),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        (String::from_utf8_lossy(&out.stderr).into_owned(), report)
+    };
+    let (stderr, report) = run("../shared/data/rti/loewenkopf", "lion.btfm");
+    assert!(
+        stderr.contains("warning: the input does not look like a stationary texture"),
+        "{stderr}"
+    );
+    assert_eq!(report["warnings"].as_array().unwrap().len(), 1, "{report}");
+    // The relief was photographed from straight above only: an oblique view is extrapolated,
+    // and synthesize says so; the measured view is not.
+    let lion = dir.path().join("lion.btfm");
+    let synthesize = |view: &str| {
+        let out = btfmrf(&[
+            "synthesize",
+            s(&lion),
+            "--size",
+            "32",
+            "--view",
+            view,
+            "--light",
+            "45,90",
+            "--out",
+            s(&dir.path().join("lion.png")),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let stderr = synthesize("60,0");
+    assert!(
+        stderr.contains("warning: view 60,0 is 60 deg from the nearest measured view (0,0)"),
+        "{stderr}"
+    );
+    assert!(!synthesize("0,0").contains("warning"));
+    let knit = tiny_btf(&dir.path().join("k.zip"), 32, btfmrf::btf::ImageFormat::Png);
+    let (stderr, report) = run(s(&knit), "knit.btfm");
+    assert!(!stderr.contains("stationary"), "{stderr}");
+    assert!(
+        report["warnings"].as_array().unwrap().is_empty(),
+        "{report}"
+    );
+}

@@ -190,3 +190,40 @@ fn the_recognition_experiment_shows_the_invariant_features_beating_colour_histog
     assert!(mrf >= 0.9, "MRF accuracy on relit photographs {mrf}");
     assert!(mrf > hist + 0.2, "MRF {mrf} vs colour histogram {hist}");
 }
+
+/// Issue 13 item 9: a grey photograph tinted warm, then relit by another illuminant colour and
+/// brightness, is still matched to its own tinted original. A near-grey image has nearly
+/// rank-one colour, so any feature computed along its empty colour directions measures 8-bit
+/// rounding, not texture, and must not swing with a per-channel gain.
+#[test]
+fn a_tinted_grey_photograph_relit_by_another_illuminant_is_matched_to_itself() {
+    let options = FeatureOptions::default();
+    let tint = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(0.9, 0.8, 0.6));
+    let other = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(0.6, 0.85, 1.25)) * 0.8;
+    let tinted: Vec<Array3<f32>> = PHOTOS
+        .iter()
+        .map(|p| relight(&read_image(&photo(p)).unwrap(), &tint, true))
+        .collect();
+    let database: Vec<Vec<f64>> = tinted
+        .iter()
+        .map(|im| extract(&top_half(im), &options).unwrap().values)
+        .collect();
+    for (class, image) in tinted.iter().enumerate() {
+        // The same half relit, and the unseen half relit.
+        for (what, part) in [
+            ("same half", top_half(image)),
+            ("other half", bottom_half(image)),
+        ] {
+            let query = extract(&relight(&part, &other, true), &options)
+                .unwrap()
+                .values;
+            let (found, margin) = nearest(&database, &query);
+            assert_eq!(
+                found, class,
+                "{what} of tinted {} relit matched {}",
+                PHOTOS[class], PHOTOS[found]
+            );
+            assert!(margin > 1.2, "{what} of {}: margin {margin}", PHOTOS[class]);
+        }
+    }
+}

@@ -46,7 +46,7 @@ pub struct Args {
     #[arg(long)]
     no_range_map: bool,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
-    /// clusters, levels, repairs.
+    /// clusters, levels, repairs, warnings.
     #[arg(long)]
     json: bool,
 }
@@ -66,6 +66,9 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         range_map: !args.no_range_map,
     };
     let (model, report) = analyze(&btf, &options, &Bar::new(global))?;
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
+    }
     let seconds = start.elapsed().as_secs_f64();
     format::write(&model, &args.out)?;
     let model_bytes = std::fs::metadata(&args.out)?.len();
@@ -81,6 +84,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             "levels": model.levels(),
             "range_map": model.range_map.as_ref().map(|r| serde_json::json!({"rows": r.rows, "cols": r.cols, "step": r.step})),
             "repairs": report.repairs,
+            "warnings": report.warnings,
         }))?;
     } else {
         if !report.repairs.is_empty() {

@@ -88,6 +88,31 @@ pub(super) fn parse_direction(s: &str) -> Result<Direction, String> {
     Ok(Direction::new(theta, phi))
 }
 
+/// Farther than this from every measured direction, a requested direction is extrapolated
+/// (degrees; the Bonn sampling's step in elevation).
+const EXTRAPOLATION_DEG: f64 = 15.0;
+
+/// A warning when `requested` is more than [`EXTRAPOLATION_DEG`] from every direction of
+/// `measured`: the model has no data there and shows the nearest measured appearance (e.g. any
+/// oblique view of a single-view RTI model).
+pub(super) fn extrapolation_warning(
+    what: &str,
+    requested: &Direction,
+    measured: &DirectionSet,
+) -> Option<String> {
+    let (nearest, angle) = measured
+        .iter()
+        .map(|m| (m, requested.angle_to(m)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    (angle > EXTRAPOLATION_DEG).then(|| {
+        format!(
+            "{what} {},{} is {angle:.0} deg from the nearest measured {what} ({:.0},{:.0}); the \
+             model has no data there and shows the appearance of the measured {what}s nearby",
+            requested.theta_deg, requested.phi_deg, nearest.theta_deg, nearest.phi_deg
+        )
+    })
+}
+
 /// Synthesized images as a BTF, drawing on one synthesis cache.
 struct ModelSource {
     model: MaterialModel,
@@ -129,6 +154,16 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         seed: args.seed,
         tileable: args.tileable,
     };
+    for (what, requested, measured) in [
+        ("view", &args.view, &model.views),
+        ("light", &args.light, &model.lights),
+    ] {
+        for d in requested {
+            if let Some(w) = extrapolation_warning(what, d, measured) {
+                eprintln!("warning: {w}");
+            }
+        }
+    }
     let start = Instant::now();
     if let Some((view, light)) = single_pair(&args)? {
         let subspaces = model.subspace_weights(view, light)?.len();

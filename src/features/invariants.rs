@@ -42,10 +42,13 @@ const MIN_INNOVATION: f64 = 1e-6;
 const RIDGE: f64 = 1e-9;
 
 /// The whitening map of an image's colours: rows `u_j^T / sqrt(lambda_j)` of the covariance
-/// eigenvectors that carry variance (between 0 and 3 of them).
+/// eigenvectors that carry variance (between 0 and 3 of them), with the unit eigenvectors and
+/// the mean colour, to project the image onto the colour directions it really has.
 #[derive(Debug, Clone)]
 pub(super) struct Whitening {
     rows: Vec<[f64; 3]>,
+    directions: Vec<[f64; 3]>,
+    mean: [f64; 3],
 }
 
 impl Whitening {
@@ -54,7 +57,7 @@ impl Whitening {
     /// level of rounding noise are dropped.
     pub(super) fn of(image: &Array3<f64>, eight_bit: bool) -> Self {
         let n = (image.len() / D).max(1) as f64;
-        let mean: Vec<f64> = image.outer_iter().map(|p| p.sum() / n).collect();
+        let mean: [f64; 3] = std::array::from_fn(|c| image.index_axis(Axis(0), c).sum() / n);
         let mut cov = Matrix3::<f64>::zeros();
         for i in 0..D {
             for j in 0..=i {
@@ -71,7 +74,11 @@ impl Whitening {
         let largest = eigen.eigenvalues.max();
         let magnitude = mean.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         if is_flat(magnitude, largest.max(0.0)) {
-            return Self { rows: Vec::new() };
+            return Self {
+                rows: Vec::new(),
+                directions: Vec::new(),
+                mean,
+            };
         }
         let floor = if eight_bit {
             (RANK_TOLERANCE * largest).max(QUANTISATION_FLOOR * srgb8_rounding_variance(magnitude))
@@ -80,15 +87,47 @@ impl Whitening {
         };
         let mut order: Vec<usize> = (0..D).collect();
         order.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
-        let rows = order
+        let kept: Vec<usize> = order
             .into_iter()
             .filter(|&j| eigen.eigenvalues[j] > floor)
-            .map(|j| {
-                let scale = eigen.eigenvalues[j].sqrt();
-                std::array::from_fn(|c| eigen.eigenvectors[(c, j)] / scale)
-            })
             .collect();
-        Self { rows }
+        let unit = |j: usize| -> [f64; 3] { std::array::from_fn(|c| eigen.eigenvectors[(c, j)]) };
+        let rows = kept
+            .iter()
+            .map(|&j| unit(j).map(|u| u / eigen.eigenvalues[j].sqrt()))
+            .collect();
+        Self {
+            rows,
+            directions: kept.into_iter().map(unit).collect(),
+            mean,
+        }
+    }
+
+    /// The image with its colours projected onto the kept colour directions (mean colour plus
+    /// the components along them): what is left when storage noise in the absent directions
+    /// is removed. Unchanged (a copy) when all three directions carry variance.
+    pub(super) fn project(&self, image: &Array3<f64>) -> Array3<f64> {
+        if self.directions.len() == D {
+            return image.clone();
+        }
+        let mut out = Array3::<f64>::zeros(image.dim());
+        let (_, h, w) = image.dim();
+        for r in 0..h {
+            for x in 0..w {
+                let y: [f64; 3] = std::array::from_fn(|c| image[[c, r, x]] - self.mean[c]);
+                let mut p = self.mean;
+                for u in &self.directions {
+                    let t = u[0] * y[0] + u[1] * y[1] + u[2] * y[2];
+                    for (pc, uc) in p.iter_mut().zip(u) {
+                        *pc += t * uc;
+                    }
+                }
+                for (c, v) in p.into_iter().enumerate() {
+                    out[[c, r, x]] = v;
+                }
+            }
+        }
+        out
     }
 
     /// The statistics of the whitened level from those of the raw level: `T V T^T` with
@@ -126,7 +165,7 @@ pub(super) fn looks_8bit(image: &Array3<f32>) -> bool {
 
 /// Number of 3D CAR features per level for `eta` neighbours.
 pub(super) fn car3d_len(eta: usize) -> usize {
-    eta + 2 * D * eta + 1 + D
+    eta + D * eta + eta + 1 + D
 }
 
 /// All features of one `(3, h, w)` pyramid level: the 3D CAR invariants of the whitened
@@ -165,9 +204,9 @@ pub(super) fn level_features(
 }
 
 /// The 3D CAR invariants from the statistics `v` of a whitened level with `k <= 3` colour
-/// directions (`v` is `k (1 + eta)` square): `tr A_s` (per offset), the real parts and the
-/// absolute imaginary parts of the eigenvalues of every `A_s` (sorted descending, 3 per
-/// offset), `alpha3`, and the eigenvalues of `Sigma Phi^-1` (sorted descending). Missing
+/// directions (`v` is `k (1 + eta)` square): `tr A_s` (per offset), the real parts of the
+/// eigenvalues of every `A_s` (sorted descending, 3 per offset), their largest absolute
+/// imaginary part (1 per offset), `alpha3`, and the eigenvalues of `Sigma Phi^-1` (sorted descending). Missing
 /// colour directions, levels too small to fit (`None`) and failed fits count as white noise
 /// (eigenvalue 0, innovation share 1).
 pub(super) fn car3d_invariants(v: Option<DMatrix<f64>>, eta: usize) -> Vec<f64> {
@@ -188,7 +227,7 @@ pub(super) fn car3d_invariants(v: Option<DMatrix<f64>>, eta: usize) -> Vec<f64> 
         None => (
             vec![0.0; eta],
             vec![0.0; D * eta],
-            vec![0.0; D * eta],
+            vec![0.0; eta],
             vec![1.0; D],
         ),
         Some((k, gamma_t, shares)) => {
@@ -199,7 +238,7 @@ pub(super) fn car3d_invariants(v: Option<DMatrix<f64>>, eta: usize) -> Vec<f64> 
                 traces.push(a.trace());
                 let (r, i) = sorted_eigenvalues(&a);
                 re.extend(r);
-                im.extend(i);
+                im.push(i);
             }
             (traces, re, im, shares)
         }
@@ -212,19 +251,22 @@ pub(super) fn car3d_invariants(v: Option<DMatrix<f64>>, eta: usize) -> Vec<f64> 
     out
 }
 
-/// Eigenvalues of a real `k x k` matrix (`k <= 3`), padded with zeros to 3: real parts sorted
-/// descending and absolute imaginary parts sorted descending (each list on its own, so both
-/// are continuous, symmetric functions of the spectrum).
-pub(super) fn sorted_eigenvalues(a: &DMatrix<f64>) -> ([f64; D], [f64; D]) {
+/// Eigenvalues of a real `k x k` matrix (`k <= 3`): the real parts padded with zeros to 3 and
+/// sorted descending, and the largest absolute imaginary part. A real 3x3 matrix has at most
+/// one complex-conjugate pair, so that one number holds all its imaginary information (a
+/// sorted list of three would repeat it and end in a zero that never varies). Both are
+/// continuous, symmetric functions of the spectrum.
+pub(super) fn sorted_eigenvalues(a: &DMatrix<f64>) -> ([f64; D], f64) {
     let ev = a.complex_eigenvalues();
     let mut re = [0.0; D];
-    let mut im = [0.0; D];
+    let mut im = 0.0f64;
     for (j, z) in ev.iter().take(D).enumerate() {
         re[j] = if z.re.is_finite() { z.re } else { 0.0 };
-        im[j] = if z.im.is_finite() { z.im.abs() } else { 0.0 };
+        if z.im.is_finite() {
+            im = im.max(z.im.abs());
+        }
     }
     re.sort_by(|a, b| b.total_cmp(a));
-    im.sort_by(|a, b| b.total_cmp(a));
     (re, im)
 }
 
@@ -287,7 +329,9 @@ pub(super) fn car2d_gamma(
 
 /// Per-channel gain-invariant colour moments of a `(3, h, w)` linear image: coefficient of
 /// variation (R, G, B), skewness (R, G, B), excess kurtosis (R, G, B), correlation coefficients
-/// (RG, RB, GB). Flat channels give 0.
+/// (RG, RB, GB). Flat channels give 0. Pass the image projected onto its kept colour
+/// directions ([`Whitening::project`]): on a near-grey image the correlations would otherwise
+/// measure rounding noise, which a per-channel gain changes by many database deviations.
 pub(super) fn colour_statistics(image: &Array3<f64>) -> Vec<f64> {
     let n = (image.len() / D).max(1) as f64;
     let mut mean = [0.0; D];

@@ -55,9 +55,12 @@
 //!   the colour directions with a variance above `1e-6` of the largest are modelled, and, in
 //!   an image whose values are all 8-bit sRGB codes, above ten times the variance of 8-bit
 //!   rounding too (a grey photograph relit and stored at 8 bits has rounding noise in the
-//!   other two directions, which must not count as texture);
-//!   the missing ones are filled with the values of independent white noise (eigenvalue 0,
-//!   share of innovation 1), so the vector keeps its length. The rank decision is not itself
+//!   other two directions, which must not count as texture; the floor is absolute, so it is
+//!   used only where the storage is known); the missing ones are filled with the
+//!   values of independent white noise (eigenvalue 0, share of innovation 1), so the vector
+//!   keeps its length. The colour moments are computed on the image projected onto the kept
+//!   directions, so a near-grey image's channel correlations are exactly +-1 and its
+//!   per-channel moments equal, whatever the gains. The rank decision is not itself
 //!   invariant near these thresholds; grey and clearly colourful images are far from them.
 //! - Levels with too few sites for the neighbourhood (fewer than `2 d eta` equations, e.g. the
 //!   coarse levels of an 8x8 image), and flat or saturated (constant) images, give the same
@@ -114,7 +117,7 @@ impl FeatureOptions {
         self.levels.clamp(1, 8)
     }
 
-    /// Number of features: `levels (eta (1 + 2 d) + 1 + d + d eta) + 12`.
+    /// Number of features: `levels (eta (2 + d) + 1 + d + d eta) + 12`.
     pub fn len(&self) -> usize {
         self.names().len()
     }
@@ -125,7 +128,7 @@ impl FeatureOptions {
     }
 
     /// A name for every feature, in vector order (e.g. `L0.tr(0,1)`, `L2.eig_re(1,0)#1`,
-    /// `L1.g2d.G(1,-1)`, `cv.R`, `corr.GB`).
+    /// `L2.eig_im(1,0)`, `L1.g2d.G(1,-1)`, `cv.R`, `corr.GB`).
     pub fn names(&self) -> Vec<String> {
         self.described().into_iter().map(|(n, _)| n).collect()
     }
@@ -145,12 +148,13 @@ impl FeatureOptions {
             for o in offsets {
                 out.push((format!("L{l}.tr{}", s(o)), full));
             }
-            for part in ["eig_re", "eig_im"] {
-                for o in offsets {
-                    for j in 1..=D {
-                        out.push((format!("L{l}.{part}{}#{j}", s(o)), full));
-                    }
+            for o in offsets {
+                for j in 1..=D {
+                    out.push((format!("L{l}.eig_re{}#{j}", s(o)), full));
                 }
+            }
+            for o in offsets {
+                out.push((format!("L{l}.eig_im{}", s(o)), full));
             }
             out.push((format!("L{l}.alpha3"), full));
             for j in 1..=D {
@@ -205,10 +209,10 @@ pub fn extract(image: &Array3<f32>, options: &FeatureOptions) -> Result<Features
     if let Some((idx, _)) = image.indexed_iter().find(|(_, v)| !v.is_finite()) {
         return Err(FeatureError::NotFinite(idx.0, idx.1, idx.2));
     }
-    let image_f32 = image;
+    let eight_bit = invariants::looks_8bit(image);
     let image = image.mapv(f64::from);
     let offsets = options.offsets();
-    let whitening = invariants::Whitening::of(&image, invariants::looks_8bit(image_f32));
+    let whitening = invariants::Whitening::of(&image, eight_bit);
     let mut values = Vec::with_capacity(options.len());
     let mut level = image.clone();
     for l in 0..options.level_count() {
@@ -217,7 +221,7 @@ pub fn extract(image: &Array3<f32>, options: &FeatureOptions) -> Result<Features
         }
         values.extend(invariants::level_features(&level, &whitening, offsets));
     }
-    values.extend(invariants::colour_statistics(&image));
+    values.extend(invariants::colour_statistics(&whitening.project(&image)));
     debug_assert_eq!(values.len(), options.len());
     debug_assert!(values.iter().all(|v| v.is_finite()));
     Ok(Features { values })

@@ -2,7 +2,7 @@
 //! a random regular 3x3 colour transform leaves the `ColourTransform` features unchanged, and
 //! the quantities that are not invariant do change (so the tests can fail).
 
-use nalgebra::Matrix3;
+use nalgebra::{DMatrix, Matrix3};
 use ndarray::Array3;
 use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -83,8 +83,8 @@ fn names_match_the_vector_and_the_documented_length() {
     let f = extract(&colour_field(64, 1), &options).unwrap();
     assert_eq!(f.values.len(), options.len());
     assert_eq!(options.invariances().len(), options.len());
-    // 4 levels x (eta (1 + 2 d) + 1 + d + d eta) + 12 with eta = 4, d = 3.
-    assert_eq!(options.len(), 4 * (4 * 7 + 1 + 3 + 12) + 12);
+    // 4 levels x (eta (2 + d) + 1 + d + d eta) + 12 with eta = 4, d = 3.
+    assert_eq!(options.len(), 4 * (4 * 5 + 1 + 3 + 12) + 12);
     let names = options.names();
     let unique: std::collections::HashSet<_> = names.iter().collect();
     assert_eq!(unique.len(), names.len());
@@ -167,4 +167,19 @@ fn a_grey_image_has_rank_one_colour_and_keeps_its_features_under_any_illuminant(
     let f = extract(&relight(&grey, &b, true), &FeatureOptions::default()).unwrap();
     let (err, name) = worst(&a, &f, |i| i == Invariance::ColourTransform);
     assert!(err < 0.2, "{name} moved by {err}");
+}
+
+#[test]
+fn one_imaginary_part_per_matrix_holds_the_complex_pair() {
+    // A rotation-scaling block (eigenvalues 0.3 +- 0.4i) beside a real eigenvalue 0.5: the real
+    // parts sorted descending, and the pair's |imaginary part| once (issue 13: three sorted
+    // imaginary parts repeated it and ended in a zero that never varied).
+    let a = DMatrix::from_row_slice(3, 3, &[0.3, -0.4, 0.0, 0.4, 0.3, 0.0, 0.0, 0.0, 0.5]);
+    let (re, im) = super::invariants::sorted_eigenvalues(&a);
+    for (got, want) in re.iter().zip([0.5, 0.3, 0.3]) {
+        assert!((got - want).abs() < 1e-12, "{re:?}");
+    }
+    assert!((im - 0.4).abs() < 1e-12, "{im}");
+    let (_, im) = super::invariants::sorted_eigenvalues(&DMatrix::identity(3, 3));
+    assert_eq!(im, 0.0);
 }
