@@ -40,6 +40,7 @@ pub mod features;
 mod fft;
 pub mod geometry;
 pub mod lpca;
+pub mod memory;
 pub mod model;
 pub mod mrf;
 pub mod progress;

@@ -13,11 +13,23 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() -> ExitCode {
     btfmrf::allocator::keep_freed_memory();
+    on_interrupt_remove_temporaries();
     match cli::run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
+            eprintln!("error: {}", cli::error_line(&e));
+            cli::exit_code(&e)
         }
     }
+}
+
+/// SIGINT, SIGTERM or SIGHUP: delete the half-written outputs (`.btfmrf-partial-*`), say so on
+/// one error line, and exit with status 130 (the shell's code for an interrupted command).
+fn on_interrupt_remove_temporaries() {
+    // Without a handler the default action (exit, leaving temporaries) still applies.
+    let _ = ctrlc::set_handler(|| {
+        let removed = btfmrf::btf::io::partial::remove_registered();
+        eprintln!("error: interrupted; removed {removed} partial output(s)");
+        std::process::exit(130);
+    });
 }

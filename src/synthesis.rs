@@ -157,7 +157,18 @@ fn check(model: &MaterialModel, o: &SynthesisOptions) -> Result<()> {
             ),
         ));
     }
-    let step = 1usize << (model.levels().max(1) - 1);
+    let step = model.min_synthesis_side();
+    if o.rows < step || o.cols < step {
+        return Err(ModelError::parameter(
+            "--size",
+            format!(
+                "{}x{} is smaller than the model's {} pyramid levels allow: use at least {step}",
+                o.cols,
+                o.rows,
+                model.levels()
+            ),
+        ));
+    }
     if o.tileable && (!o.rows.is_multiple_of(step) || !o.cols.is_multiple_of(step)) {
         return Err(ModelError::parameter(
             "--size",

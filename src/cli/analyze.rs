@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use btfmrf::analysis::{AnalysisOptions, analyze};
 use btfmrf::btf::Btf;
+use btfmrf::memory;
 use btfmrf::model::{ModelKind, format};
 
 use super::{Bar, Global, emit, human_bytes};
@@ -56,6 +57,23 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     for w in btf.warnings() {
         eprintln!("warning: {w}");
     }
+    let (w, h, images) = (
+        btf.width() as usize,
+        btf.height() as usize,
+        btf.image_count(),
+    );
+    let need = |clusters| memory::analysis_bytes(w, h, images, clusters);
+    global.check_memory(
+        format!(
+            "analyze of {images} images of {w}x{h} into {} clusters",
+            args.clusters
+        ),
+        need(args.clusters),
+        |budget| match memory::largest_fitting(args.clusters, budget, need) {
+            Some(k) => format!("--clusters {k} fits"),
+            None => "the images are too large for this budget".into(),
+        },
+    )?;
     let start = Instant::now();
     let options = AnalysisOptions {
         kind: args.model,

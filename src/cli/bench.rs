@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use btfmrf::btf::Btf;
 use btfmrf::eval::bench::{self, Baseline, BenchOptions};
 use btfmrf::lpca::Method;
+use btfmrf::memory;
 
 use super::{Bar, Global, emit};
 
@@ -65,6 +66,21 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     for w in btf.warnings() {
         eprintln!("warning: {w}");
     }
+    let shape = (
+        btf.width() as usize,
+        btf.height() as usize,
+        btf.image_count(),
+    );
+    let need = |side| memory::bench_bytes(shape, args.clusters, side, !args.mrf_only);
+    global.check_memory(
+        format!("bench with --synthesis-size {}", args.synthesis_size),
+        need(args.synthesis_size),
+        |budget| match memory::largest_fitting(args.synthesis_size, budget, need) {
+            Some(s) if need(s) > need(1) => format!("--synthesis-size {s} fits"),
+            _ if !args.mrf_only => "try --mrf-only, or a smaller BTF".into(),
+            _ => "the images are too large for this budget".into(),
+        },
+    )?;
     let options = BenchOptions {
         clusters: args.clusters,
         synthesis_side: args.synthesis_size,

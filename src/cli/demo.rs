@@ -6,10 +6,11 @@ use std::time::Instant;
 use anyhow::Context;
 use btfmrf::btf::io::{self, publish_dir, temp_dir_beside};
 use btfmrf::btf::synthetic::SyntheticMaterial;
-use btfmrf::btf::{Btf, Direction, ImageFormat};
+use btfmrf::btf::{Btf, Direction, DirectionSet, ImageFormat};
 use btfmrf::eval::bench::{self, Baseline, BenchOptions};
 use btfmrf::eval::montage::montage;
 use btfmrf::lpca::{LpcaModel, Method};
+use btfmrf::memory;
 use btfmrf::model::{MaterialModel, ModelKind, format};
 use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
 use btfmrf::synthesis::SynthesisOptions;
@@ -57,6 +58,34 @@ const RENDER_LIGHTS: [(f64, f64); 3] = [(30.0, 300.0), (60.0, 200.0), (75.0, 60.
 const LIGHTS: [(f64, f64); 3] = [(30.0, 0.0), (60.0, 90.0), (75.0, 210.0)];
 
 pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
+    let side = args.size as usize;
+    let images = DirectionSet::bonn().len().pow(2);
+    let bench = BenchOptions::default();
+    let need = |size: usize, enlarge: usize| {
+        memory::bench_bytes(
+            (size, size, images),
+            bench.clusters,
+            bench.synthesis_side,
+            true,
+        )
+        .max(memory::synthesis_bytes(
+            enlarge,
+            enlarge,
+            memory::SUBSPACES_PER_IMAGE,
+        ))
+    };
+    global.check_memory(
+        format!("demo --size {} --enlarge {}", args.size, args.enlarge),
+        need(side, args.enlarge),
+        |budget| {
+            let size = memory::largest_fitting(side, budget, |s| need(s, 1));
+            let enlarge = memory::largest_fitting(args.enlarge, budget, |e| need(1, e));
+            match (size, enlarge) {
+                (Some(s), Some(e)) => format!("--size {s} --enlarge {e} fit"),
+                _ => "nothing fits".into(),
+            }
+        },
+    )?;
     let start = Instant::now();
     let tmp = temp_dir_beside(&args.out)?;
     let dir = tmp.path();

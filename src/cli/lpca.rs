@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use btfmrf::btf::Btf;
 use btfmrf::lpca::{LpcaModel, LpcaOptions, Method, format};
+use btfmrf::memory;
 
 use super::{Bar, Global, emit, human_bytes};
 
@@ -84,6 +85,24 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         seed: args.seed,
         evaluate: true,
     };
+    let (w, h) = (btf.width() as usize, btf.height() as usize);
+    let (nv, nl) = (btf.views().len(), btf.lights().len());
+    let held = |method| if method == Method::PcaRf { nl } else { nv * nl };
+    global.check_memory(
+        format!(
+            "lpca --method {} of {} images of {w}x{h}",
+            method.name(),
+            nv * nl
+        ),
+        memory::lpca_bytes(w, h, held(method)),
+        |budget| {
+            if method != Method::PcaRf && memory::lpca_bytes(w, h, nl) <= budget {
+                "--method pca-rf (one view at a time) fits".into()
+            } else {
+                "the images are too large for this budget".into()
+            }
+        },
+    )?;
     let start = Instant::now();
     let (model, report) = LpcaModel::fit(&btf, &options, &Bar::new(global))?;
     let total = start.elapsed().as_secs_f64();

@@ -19,6 +19,7 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use btfmrf::btf::ImageFormat;
+use btfmrf::memory::{self, Budget, OverBudget};
 use btfmrf::progress::Progress;
 
 /// btfmrf: measured BTFs to Markov-random-field models of a few tens of kilobytes, and back.
@@ -52,6 +53,77 @@ pub struct Global {
     /// No progress bars (they are drawn on stderr only when it is a terminal anyway).
     #[arg(long, short, global = true)]
     quiet: bool,
+    /// Memory analyze, lpca, synthesize, render, bench and demo may use, e.g. 2G or 512M:
+    /// they estimate their peak before starting and refuse (exit status 2) above it.
+    /// Default: half this machine's memory.
+    #[arg(long, global = true, value_name = "SIZE", value_parser = memory::parse_bytes)]
+    memory_limit: Option<u64>,
+}
+
+impl Global {
+    /// Refuses `need` bytes over the memory budget; `hint` gets the budget and names an
+    /// option value that fits.
+    pub fn check_memory(
+        &self,
+        what: impl Into<String>,
+        need: u64,
+        hint: impl FnOnce(u64) -> String,
+    ) -> Result<(), OverBudget> {
+        Budget::new(self.memory_limit).check(what, need, hint)
+    }
+
+    /// Refuses a `rows` x `cols` synthesis drawing on `subspaces` subspace images over the
+    /// budget (`bytes` is [`memory::synthesis_bytes`] or [`memory::btf_synthesis_bytes`]),
+    /// naming the largest square `option` size that fits.
+    pub fn check_synthesis(
+        &self,
+        option: &str,
+        (rows, cols): (usize, usize),
+        subspaces: usize,
+        bytes: fn(usize, usize, usize) -> u64,
+    ) -> Result<(), OverBudget> {
+        let need = bytes(rows, cols, subspaces);
+        self.check_memory(format!("{option} {cols}x{rows}"), need, |budget| {
+            let fit = memory::largest_fitting(rows.max(cols), budget, |s| bytes(s, s, subspaces));
+            fit.map_or("nothing fits".into(), |s| format!("{option} {s} fits"))
+        })
+    }
+}
+
+/// The error's line for the terminal: its chain of causes joined by ": ", a cause that the
+/// message before it already quotes left out (I/O errors carry their source in their text),
+/// and control characters escaped so that a file or member name cannot forge a line.
+pub fn error_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line.chars()
+        .flat_map(|c| {
+            let escaped: Vec<char> = if c.is_control() {
+                c.escape_default().collect()
+            } else {
+                vec![c]
+            };
+            escaped
+        })
+        .collect()
+}
+
+/// Exit status 2 for a request refused by the memory budget, 1 for any other error.
+pub fn exit_code(e: &anyhow::Error) -> std::process::ExitCode {
+    if e.chain().any(|c| c.is::<OverBudget>()) {
+        std::process::ExitCode::from(2)
+    } else {
+        std::process::ExitCode::FAILURE
+    }
 }
 
 #[derive(Debug, Subcommand)]
@@ -185,5 +257,24 @@ pub fn human_bytes(bytes: u64) -> String {
         format!("{bytes} B")
     } else {
         format!("{v:.1} {}", UNITS[unit])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn error_lines_are_one_line_without_repeats() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "No such file");
+        let e = anyhow::Error::new(btfmrf::btf::BtfError::Io {
+            path: "a.zip".into(),
+            source: io,
+        });
+        assert_eq!(error_line(&e), "a.zip: No such file");
+        let e = anyhow::anyhow!("bad member 'x\n\u{1b}[31merror: forged'").context("reading");
+        let line = error_line(&e);
+        assert_eq!(line, "reading: bad member 'x\\n\\u{1b}[31merror: forged'");
+        assert!(!line.contains('\n') && !line.contains('\u{1b}'));
     }
 }

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use btfmrf::btf::{Direction, io};
 use btfmrf::lpca;
+use btfmrf::memory;
 use btfmrf::model::format;
 use btfmrf::render::headless::ModelRenderOptions;
 use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
@@ -75,7 +76,7 @@ pub struct Args {
     json: bool,
 }
 
-pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
+pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let (rows, cols) = args.size;
     let (width, height) = (u32::try_from(cols)?, u32::try_from(rows)?);
     btfmrf::render::headless::check_size(width, height)?;
@@ -146,6 +147,29 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
         Renderer::new()?.render_lpca(&model, &mesh, &scene)?
     } else {
         let model = format::read(&args.model)?;
+        let texture = args
+            .texture_size
+            .unwrap_or(args.max_texture_size.clamp(32, 8192));
+        let need = |side| {
+            memory::render_bytes(
+                width as usize * height as usize,
+                side,
+                model.subspaces.len(),
+            )
+        };
+        global.check_memory(
+            format!("render with a {texture}^2 texture"),
+            need(texture),
+            |budget| {
+                let fits = (5..=13)
+                    .map(|p| 1usize << p)
+                    .rev()
+                    .find(|&s| need(s) <= budget);
+                fits.map_or("nothing fits".into(), |s| {
+                    format!("--texture-size {s} fits")
+                })
+            },
+        )?;
         Renderer::new()?.render_model(
             &model,
             &mesh,

@@ -7,6 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use btfmrf::btf::{Btf, BtfError, Direction, DirectionSet, ImageSource, io};
 use btfmrf::lpca;
+use btfmrf::memory;
 use btfmrf::model::{MaterialModel, format};
 use btfmrf::synthesis::{SynthesisCache, SynthesisOptions};
 use ndarray::Array3;
@@ -167,6 +168,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let start = Instant::now();
     if let Some((view, light)) = single_pair(&args)? {
         let subspaces = model.subspace_weights(view, light)?.len();
+        global.check_synthesis("--size", (rows, cols), subspaces, memory::synthesis_bytes)?;
         let image = model.synthesize_image(view, light, &options)?;
         let seconds = start.elapsed().as_secs_f64();
         io::write_image(&args.out, &image)
@@ -199,6 +201,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             needed.extend(model.subspace_weights(v, l)?.into_keys());
         }
     }
+    let bytes = memory::btf_synthesis_bytes;
+    global.check_synthesis("--size", (rows, cols), needed.len(), bytes)?;
     let source = ModelSource {
         cache: model.synthesis_cache(&options)?,
         model,
@@ -364,14 +368,25 @@ fn run_lpca(args: Args, global: &Global) -> anyhow::Result<()> {
     }
 }
 
-/// The one (view, light) pair to write when `--out` names a single image (.png, .exr, .jpg);
+/// Image extensions this tool does not write (refused for `--out`, not taken as folder names).
+const OTHER_IMAGE_EXTENSIONS: [&str; 9] = [
+    "tif", "tiff", "bmp", "gif", "webp", "hdr", "tga", "heic", "avif",
+];
+
+/// The one (view, light) pair to write when `--out` names a single image (.png, .exr, .jpg,
+/// .jpeg);
 /// `None` when it names a BTF (zip or folder).
 fn single_pair(args: &Args) -> anyhow::Result<Option<(&Direction, &Direction)>> {
     let out_name = args.out.to_string_lossy().to_ascii_lowercase();
-    if ![".png", ".exr", ".jpg"]
-        .iter()
-        .any(|e| out_name.ends_with(e))
-    {
+    if io::ImageFormat::from_name(&out_name).is_none() {
+        // An image-like name we cannot write would otherwise become a folder of that name.
+        let ext = out_name.rsplit_once('.').map_or("", |(_, e)| e);
+        if OTHER_IMAGE_EXTENSIONS.contains(&ext) {
+            bail!(
+                "--out {}: .{ext} images are not supported; use .png, .jpg, .jpeg or .exr",
+                args.out.display()
+            );
+        }
         return Ok(None);
     }
     match (args.view.as_slice(), args.light.as_slice()) {

@@ -256,6 +256,8 @@ fn parse(bytes: &[u8]) -> Parse<LpcaModel> {
             }
             a
         } else {
+            // Nothing is allocated for a size the file cannot hold: the weights come next.
+            r.ensure(items, 2 * components, &what("weights"))?;
             vec![0; items]
         };
         let weights = r.halves(items.saturating_mul(components), &what("weights"))?;

@@ -200,18 +200,32 @@ impl LpcaModel {
                 format!("{} is above {MAX_COMPONENTS}", options.components),
             ));
         }
-        let bytes = format::payload_len(
-            options.method,
-            w,
-            h,
-            nv,
-            nl,
-            report.clusters,
-            options.components,
-        );
-        if bytes > u64::from(format::MAX_PAYLOAD) {
+        let limit = usize::from(u16::MAX);
+        if nv > limit || nl > limit {
             return Err(LpcaError::parameter(
-                "--components",
+                "btf",
+                format!("{nv} views x {nl} lights: a .lpca model holds at most {limit} of each"),
+            ));
+        }
+        if report.clusters > limit {
+            return Err(LpcaError::parameter(
+                "--clusters",
+                format!("{} is above {limit}", report.clusters),
+            ));
+        }
+        let payload = |clusters| {
+            format::payload_len(options.method, w, h, nv, nl, clusters, options.components)
+        };
+        let bytes = payload(report.clusters);
+        if bytes > u64::from(format::MAX_PAYLOAD) {
+            // Blame the option that alone would make it fit, if one does.
+            let option = if report.clusters > 1 && payload(1) <= u64::from(format::MAX_PAYLOAD) {
+                "--clusters"
+            } else {
+                "--components"
+            };
+            return Err(LpcaError::parameter(
+                option,
                 format!(
                     "the model would take {bytes} bytes, above the .lpca limit of {} bytes; \
                      use fewer clusters or components",

@@ -126,6 +126,18 @@ impl MaterialModel {
         self.subspaces.first().map_or(0, |s| s.levels.len())
     }
 
+    /// The smallest side, pixels, a synthesis of this model can have: `2^(levels - 1)`, so
+    /// that every pyramid level keeps at least one pixel a side (and a tileable size divisible
+    /// by it halves exactly). The one size rule for synthesis, tiling and rendering.
+    pub fn min_synthesis_side(&self) -> usize {
+        let levels = self.subspaces.iter().map(|s| s.levels.len()).max();
+        1 << levels
+            .unwrap_or(1)
+            .max(1)
+            .saturating_sub(1)
+            .min(usize::BITS as usize - 2)
+    }
+
     /// The cluster of measured pair (view, light).
     pub fn cluster_of(&self, view: usize, light: usize) -> usize {
         usize::from(self.cluster_table[view * self.lights.len() + light])

@@ -352,7 +352,7 @@ impl Renderer {
             DirectionLut::new(&model.views)?,
             DirectionLut::new(&model.lights)?,
         );
-        let min_side = (1usize << model.levels().max(1).saturating_sub(1)).max(32);
+        let min_side = model.min_synthesis_side().max(32);
         let mut plan = plan_scene(
             model,
             mesh,

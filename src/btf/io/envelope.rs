@@ -1,5 +1,6 @@
 //! The envelope shared by the model files (`.btfm`, `.lpca`): magic, version, flags, payload
 //! length, payload, CRC-32 of the payload. Checked here once, before any payload is parsed.
+//! The flags field must be zero: no flag is defined in version 1.
 
 /// The payload of `bytes` after checking the envelope; the error says what is wrong (`ext`
 /// names the file kind in messages, e.g. ".btfm").
@@ -25,6 +26,14 @@ pub(crate) fn open<'a>(
     if found != version {
         return Err(format!(
             "format version {found}; this build reads version {version}"
+        ));
+    }
+    // No flag is defined yet: a file with any set was written by a later version whose
+    // meaning this build cannot know, so it is refused rather than misread.
+    let flags = u16::from_le_bytes(field(6, 2)?.try_into().expect("2 bytes"));
+    if flags != 0 {
+        return Err(format!(
+            "unknown flags {flags:#06x} in the header (written by a newer version?)"
         ));
     }
     let len = u32::from_le_bytes(field(8, 4)?.try_into().expect("4 bytes"));

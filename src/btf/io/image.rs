@@ -56,6 +56,33 @@ fn is_exr(bytes: &[u8]) -> bool {
     bytes.starts_with(&EXR_MAGIC)
 }
 
+/// A decoder's message on one line: some span several, which would break the CLI's one-line
+/// errors.
+fn one_line(e: impl std::fmt::Display) -> String {
+    let text = e.to_string();
+    let lines: Vec<&str> = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect();
+    lines.join("; ")
+}
+
+/// The most bytes a file holding a `width` x `height` image may take: 32 bytes a pixel (an
+/// uncompressed four-channel float EXR needs 16; JPEG and PNG far less) plus 16 MiB of
+/// metadata (ICC profiles, EXIF thumbnails). Readers refuse longer files unread.
+pub fn max_file_bytes(width: u32, height: u32) -> u64 {
+    32 * u64::from(width) * u64::from(height) + (16 << 20)
+}
+
+/// The fewest bytes a Huffman-coded JPEG of `width` x `height` can take: every 8 x 8 block of
+/// its full-resolution component needs at least one bit (a one-bit DC code), whatever the
+/// sampling or progression. A file far smaller than its header claims is truncated or forged,
+/// and is refused before a decoder allocates the claimed size and fills it with grey.
+fn min_jpeg_bytes(width: u32, height: u32) -> u64 {
+    (u64::from(width.div_ceil(8)) * u64::from(height.div_ceil(8))).div_ceil(8)
+}
+
 fn check_side(file: &str, width: u64, height: u64) -> Result<()> {
     if width == 0 || height == 0 {
         return Err(BtfError::image(
@@ -79,7 +106,7 @@ fn check_side(file: &str, width: u64, height: u64) -> Result<()> {
 fn reader<'a>(bytes: &'a [u8], file: &str, limited: bool) -> Result<ImageReader<Cursor<&'a [u8]>>> {
     let mut reader = ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
-        .map_err(|e| BtfError::image(file, e))?;
+        .map_err(|e| BtfError::image(file, one_line(e)))?;
     if reader.format().is_none() {
         return Err(BtfError::image(
             file,
@@ -106,7 +133,7 @@ fn reader<'a>(bytes: &'a [u8], file: &str, limited: bool) -> Result<ImageReader<
 pub fn probe_size(bytes: &[u8], file: &str) -> Result<(u32, u32)> {
     let (w, h) = if is_exr(bytes) {
         let meta = exrp::MetaData::read_from_buffered(Cursor::new(bytes), false)
-            .map_err(|e| BtfError::image(file, format!("corrupt EXR header ({e})")))?;
+            .map_err(|e| BtfError::image(file, format!("corrupt EXR header ({})", one_line(e))))?;
         let header = meta
             .headers
             .first()
@@ -132,7 +159,7 @@ fn header_error(file: &str, e: image::ImageError) -> BtfError {
             file,
             format!("image header claims a size beyond the {MAX_SIDE}x{MAX_SIDE} limit"),
         ),
-        other => BtfError::image(file, format!("corrupt image ({other})")),
+        other => BtfError::image(file, format!("corrupt image ({})", one_line(other))),
     }
 }
 
@@ -148,11 +175,11 @@ pub fn decode(bytes: &[u8], file: &str) -> Result<Array3<f32>> {
         return decode_exr(bytes, file);
     }
     // Size check on the header before the decoder allocates anything.
-    probe_size(bytes, file)?;
-    check_jpeg_complete(bytes, file)?;
+    let (w, h) = probe_size(bytes, file)?;
+    check_jpeg_complete(bytes, file, (w, h))?;
     let img = reader(bytes, file, true)?
         .decode()
-        .map_err(|e| BtfError::image(file, format!("corrupt image data ({e})")))?;
+        .map_err(|e| BtfError::image(file, format!("corrupt image data ({})", one_line(e))))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let mut out = Array3::<f32>::zeros((3, h, w));
     let deep = matches!(
@@ -196,9 +223,21 @@ pub fn decode(bytes: &[u8], file: &str) -> Result<Array3<f32>> {
 /// JPEG decoders fill a truncated scan with grey and report success; we refuse it instead.
 /// In entropy-coded data 0xFF is always followed by 0x00 or a restart marker, so an
 /// end-of-image marker (FF D9) after the last start-of-scan (FF DA) means the file is whole.
-fn check_jpeg_complete(bytes: &[u8], file: &str) -> Result<()> {
+/// A file shorter than [`min_jpeg_bytes`] of its claimed size is refused too.
+fn check_jpeg_complete(bytes: &[u8], file: &str, (w, h): (u32, u32)) -> Result<()> {
     if !bytes.starts_with(&[0xff, 0xd8]) {
         return Ok(());
+    }
+    let least = min_jpeg_bytes(w, h);
+    if (bytes.len() as u64) < least {
+        return Err(BtfError::image(
+            file,
+            format!(
+                "truncated JPEG: {} bytes cannot hold the {w}x{h} pixels its header claims \
+                 (at least {least} bytes)",
+                bytes.len()
+            ),
+        ));
     }
     let last_scan = bytes
         .windows(2)
@@ -223,7 +262,7 @@ fn decode_exr(bytes: &[u8], file: &str) -> Result<Array3<f32>> {
         .first_valid_layer()
         .all_attributes()
         .from_buffered(Cursor::new(bytes))
-        .map_err(|e| BtfError::image(file, format!("corrupt EXR ({e})")))?;
+        .map_err(|e| BtfError::image(file, format!("corrupt EXR ({})", one_line(e))))?;
     let layer = &image.layer_data;
     let (w, h) = (layer.size.width(), layer.size.height());
     let find = |names: &[&str]| {
@@ -356,7 +395,7 @@ pub fn encode_rgb8(rgb: &[u8], w: u32, h: u32, format: ImageFormat, file: &str) 
             ));
         }
     };
-    result.map_err(|e| BtfError::image(file, format!("cannot encode ({e})")))?;
+    result.map_err(|e| BtfError::image(file, format!("cannot encode ({})", one_line(e))))?;
     Ok(buf)
 }
 
@@ -390,7 +429,7 @@ pub fn encode_exr_channels(
     exrp::Image::from_layer(layer)
         .write()
         .to_buffered(&mut buf)
-        .map_err(|e| BtfError::image(file, format!("cannot encode EXR ({e})")))?;
+        .map_err(|e| BtfError::image(file, format!("cannot encode EXR ({})", one_line(e))))?;
     Ok(buf.into_inner())
 }
 
@@ -439,6 +478,30 @@ mod tests {
             .sum::<f32>()
             / im.len() as f32;
         assert!(mean_err < 0.01, "{mean_err}");
+    }
+
+    #[test]
+    fn real_jpegs_are_never_below_the_least_size() {
+        // Flat grey at the lowest quality is the smallest a JPEG of a size can be.
+        for side in [1, 8, 64, 512, 1024] {
+            let flat = Array3::from_elem((3, side, side), 0.5f32);
+            let bytes = encode(&flat, ImageFormat::Jpeg { quality: 1 }, "t.jpg").unwrap();
+            let least = min_jpeg_bytes(side as u32, side as u32);
+            assert!(
+                bytes.len() as u64 >= least,
+                "{side}: {} < {least}",
+                bytes.len()
+            );
+            assert!(decode(&bytes, "t.jpg").is_ok());
+        }
+        assert_eq!(min_jpeg_bytes(16384, 16384), 524_288);
+        // Both bounds are far apart for real images; the padded-file bound is generous.
+        assert!(max_file_bytes(4, 4) > 16 << 20);
+    }
+
+    #[test]
+    fn decoder_messages_are_one_line() {
+        assert_eq!(one_line("bad\n  data\n\nhere "), "bad; data; here");
     }
 
     #[test]

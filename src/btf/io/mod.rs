@@ -4,6 +4,7 @@
 
 pub(crate) mod envelope;
 pub mod image;
+pub mod partial;
 pub mod rti;
 pub mod ubo2003;
 
@@ -19,6 +20,7 @@ use super::dataset::Btf;
 use super::error::{BtfError, Result};
 
 pub use self::image::ImageFormat;
+use self::partial::{PartialDir, PartialFile};
 pub use ubo2003::write_ubo2003;
 
 /// The largest file this library reads into memory at once (an image or a `.lp` file).
@@ -51,8 +53,8 @@ pub(crate) enum Container {
         path: PathBuf,
         archive: Mutex<ZipArchive<BufReader<File>>>,
     },
-    /// A folder on disk.
-    Dir { root: PathBuf },
+    /// A folder on disk; when `confined`, members resolve inside it ([`member_path`]).
+    Dir { root: PathBuf, confined: bool },
 }
 
 impl Container {
@@ -68,9 +70,20 @@ impl Container {
         })
     }
 
+    /// A BTF's folder: members named by its files stay inside it (unless
+    /// [`ALLOW_OUTSIDE_ENV`] says otherwise).
     pub(crate) fn dir(root: &Path) -> Self {
         Container::Dir {
             root: root.to_path_buf(),
+            confined: !outside_allowed(),
+        }
+    }
+
+    /// The folder of a file the user named directly: no confinement to check.
+    pub(crate) fn user_dir(root: &Path) -> Self {
+        Container::Dir {
+            root: root.to_path_buf(),
+            confined: false,
         }
     }
 
@@ -78,7 +91,7 @@ impl Container {
     pub(crate) fn location(&self) -> String {
         match self {
             Container::Zip { path, .. } => path.display().to_string(),
-            Container::Dir { root } => root.display().to_string(),
+            Container::Dir { root, .. } => root.display().to_string(),
         }
     }
 
@@ -86,7 +99,7 @@ impl Container {
     pub(crate) fn describe(&self, name: &str) -> String {
         match self {
             Container::Zip { path, .. } => format!("{}: {name}", path.display()),
-            Container::Dir { root } => root.join(name).display().to_string(),
+            Container::Dir { root, .. } => root.join(name).display().to_string(),
         }
     }
 
@@ -107,11 +120,15 @@ impl Container {
                 }
                 Ok(names)
             }
-            Container::Dir { root } => {
+            Container::Dir { root, .. } => {
+                // Files and links (a link is checked like any member when it is read: one
+                // rule for UBO folders and RTI lists).
                 let mut names = Vec::new();
                 for entry in std::fs::read_dir(root).map_err(|e| BtfError::io(root, e))? {
                     let entry = entry.map_err(|e| BtfError::io(root, e))?;
-                    let is_file = entry.file_type().map(|t| t.is_file()).unwrap_or(false);
+                    let kind = entry.file_type().ok();
+                    let is_file = kind.is_some_and(|t| t.is_file())
+                        || kind.is_some_and(|t| t.is_symlink()) && entry.path().is_file();
                     if is_file {
                         names.push(entry.file_name().to_string_lossy().into_owned());
                     }
@@ -122,16 +139,35 @@ impl Container {
         }
     }
 
+    /// Fails when a folder's member resolves outside a confined folder ([`member_path`]).
+    pub(crate) fn check_inside(&self, name: &str) -> Result<()> {
+        match self {
+            Container::Dir { root, confined } => member_path(root, name, *confined).map(drop),
+            Container::Zip { .. } => Ok(()),
+        }
+    }
+
     /// Reads a member whole (at most [`MAX_FILE_BYTES`]), or only its first `prefix` bytes.
     pub(crate) fn read(&self, name: &str, prefix: Option<u64>) -> Result<Vec<u8>> {
-        let limit = prefix.unwrap_or(MAX_FILE_BYTES).min(MAX_FILE_BYTES);
-        let mut buf = Vec::new();
-        let too_big = |len: u64| {
+        match prefix {
+            Some(n) => self.read_at_most(name, n.min(MAX_FILE_BYTES), false),
+            None => self.read_at_most(name, MAX_FILE_BYTES, true),
+        }
+    }
+
+    /// The first `limit` bytes of a member; with `whole`, a member longer than `limit` (by its
+    /// declared size or by the bytes that arrive) is an error instead. Memory is bounded by
+    /// `limit`, whatever a zip header declares.
+    fn read_at_most(&self, name: &str, limit: u64, whole: bool) -> Result<Vec<u8>> {
+        let too_big = |len: String| {
             BtfError::image(
                 self.describe(name),
-                format!("file of {len} bytes exceeds the {MAX_FILE_BYTES}-byte limit"),
+                format!("file of {len} bytes exceeds the {limit}-byte limit for it"),
             )
         };
+        // One byte past the limit tells a member that is too long from one that fits exactly.
+        let take = if whole { limit + 1 } else { limit };
+        let mut buf = Vec::new();
         match self {
             Container::Zip { path, archive } => {
                 let mut archive = archive.lock().unwrap_or_else(|p| p.into_inner());
@@ -139,12 +175,12 @@ impl Container {
                     path: path.clone(),
                     source,
                 })?;
-                if prefix.is_none() && member.size() > MAX_FILE_BYTES {
-                    return Err(too_big(member.size()));
+                if whole && member.size() > limit {
+                    return Err(too_big(member.size().to_string()));
                 }
-                buf.reserve(member.size().min(limit).min(MAX_RESERVE) as usize);
+                buf.reserve(member.size().min(take).min(MAX_RESERVE) as usize);
                 (&mut member)
-                    .take(limit)
+                    .take(take)
                     .read_to_end(&mut buf)
                     .map_err(|e| {
                         BtfError::image(
@@ -153,18 +189,21 @@ impl Container {
                         )
                     })?;
             }
-            Container::Dir { root } => {
-                let path = root.join(name);
+            Container::Dir { root, confined } => {
+                let path = member_path(root, name, *confined)?;
                 let file = File::open(&path).map_err(|e| BtfError::io(&path, e))?;
                 let len = file.metadata().map_err(|e| BtfError::io(&path, e))?.len();
-                if prefix.is_none() && len > MAX_FILE_BYTES {
-                    return Err(too_big(len));
+                if whole && len > limit {
+                    return Err(too_big(len.to_string()));
                 }
-                buf.reserve(len.min(limit).min(MAX_RESERVE) as usize);
-                file.take(limit)
+                buf.reserve(len.min(take).min(MAX_RESERVE) as usize);
+                file.take(take)
                     .read_to_end(&mut buf)
                     .map_err(|e| BtfError::io(&path, e))?;
             }
+        }
+        if whole && buf.len() as u64 > limit {
+            return Err(too_big(format!("more than {limit}")));
         }
         Ok(buf)
     }
@@ -172,22 +211,72 @@ impl Container {
     /// Width and height of an image member from its header (reads a prefix, the whole file
     /// only when the header does not fit in it).
     pub(crate) fn probe_image(&self, name: &str) -> Result<(u32, u32)> {
-        const PREFIX: u64 = 256 * 1024;
+        self.probe_with_head(name).map(|(size, _)| size)
+    }
+
+    /// The header's size and the prefix read for it (the whole file when it is shorter than
+    /// [`PROBE_PREFIX`]).
+    fn probe_with_head(&self, name: &str) -> Result<((u32, u32), Vec<u8>)> {
         let file = self.describe(name);
-        let head = self.read(name, Some(PREFIX))?;
+        let head = self.read(name, Some(PROBE_PREFIX))?;
         match image::probe_size(&head, &file) {
-            Err(BtfError::Image { .. }) if head.len() as u64 == PREFIX => {
-                image::probe_size(&self.read(name, None)?, &file)
+            Err(BtfError::Image { .. }) if head.len() as u64 == PROBE_PREFIX => {
+                Ok((image::probe_size(&self.read(name, None)?, &file)?, head))
             }
-            other => other,
+            other => Ok((other?, head)),
         }
     }
 
-    /// Decodes an image member into planar `(3, h, w)` linear RGB.
+    /// Decodes an image member into planar `(3, h, w)` linear RGB. The member is read only up
+    /// to what an image of its declared size can need ([`image::max_file_bytes`]): a small
+    /// image followed by a gigabyte of padding is refused, not loaded.
     pub(crate) fn load_image(&self, name: &str) -> Result<Array3<f32>> {
-        let bytes = self.read(name, None)?;
+        let ((w, h), head) = self.probe_with_head(name)?;
+        let bytes = if (head.len() as u64) < PROBE_PREFIX {
+            head // the whole file already
+        } else {
+            self.read_at_most(name, image::max_file_bytes(w, h), true)?
+        };
         image::decode(&bytes, &self.describe(name))
     }
+}
+
+/// How much of an image is read to find its size in the header.
+const PROBE_PREFIX: u64 = 256 * 1024;
+
+/// Whether the images a set names may lie outside its folder (`../x`, absolute paths, links
+/// out): never, unless this environment variable is `1`.
+pub const ALLOW_OUTSIDE_ENV: &str = "BTFMRF_ALLOW_OUTSIDE";
+
+fn outside_allowed() -> bool {
+    std::env::var_os(ALLOW_OUTSIDE_ENV).is_some_and(|v| v == "1")
+}
+
+/// The file `name` inside `root`; when `confined`, its canonical path (links resolved) must lie
+/// inside the canonical `root`, so that a hostile list cannot make us read `/etc/shadow`.
+pub(crate) fn member_path(root: &Path, name: &str, confined: bool) -> Result<PathBuf> {
+    let path = root.join(name);
+    if !confined {
+        return Ok(path);
+    }
+    let outside = |why: &str| {
+        BtfError::layout(
+            root.display(),
+            format!(
+                "'{name}' {why}; images must stay inside the set's folder \
+                 (set {ALLOW_OUTSIDE_ENV}=1 to allow it)"
+            ),
+        )
+    };
+    if Path::new(name).is_absolute() {
+        return Err(outside("is an absolute path"));
+    }
+    let base = root.canonicalize().map_err(|e| BtfError::io(root, e))?;
+    let real = path.canonicalize().map_err(|e| BtfError::io(&path, e))?;
+    if !real.starts_with(&base) {
+        return Err(outside("lies outside the folder"));
+    }
+    Ok(real)
 }
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same folder, then a rename.
@@ -200,21 +289,20 @@ pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     tmp.write_all(bytes)
         .and_then(|_| tmp.flush())
         .map_err(|e| BtfError::io(path, e))?;
-    tmp.persist(path).map_err(|e| BtfError::io(path, e.error))?;
+    tmp.persist(path).map_err(|e| BtfError::io(path, e))?;
     Ok(())
 }
 
 /// A temporary file next to `path` (same folder, so that the final rename is atomic); it is
-/// deleted if dropped before being persisted.
-pub(crate) fn temp_file_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
+/// deleted if dropped before being persisted, or on an interrupt ([`partial`]).
+pub(crate) fn temp_file_beside(path: &Path) -> Result<PartialFile> {
     let parent = parent_dir(path);
-    partial_builder(0o644)
-        .tempfile_in(parent)
-        .map_err(|e| BtfError::io(parent, e))
+    PartialFile::new_in(parent).map_err(|e| BtfError::io(parent, e))
 }
 
-/// A temporary folder next to `path`, deleted if dropped; [`publish_dir`] gives it its name.
-pub fn temp_dir_beside(path: &Path) -> Result<tempfile::TempDir> {
+/// A temporary folder next to `path`, deleted if dropped or on an interrupt ([`partial`]);
+/// [`publish_dir`] gives it its name.
+pub fn temp_dir_beside(path: &Path) -> Result<PartialDir> {
     if path.exists() {
         return Err(BtfError::io(
             path,
@@ -225,31 +313,12 @@ pub fn temp_dir_beside(path: &Path) -> Result<tempfile::TempDir> {
         ));
     }
     let parent = parent_dir(path);
-    partial_builder(0o755)
-        .tempdir_in(parent)
-        .map_err(|e| BtfError::io(parent, e))
+    PartialDir::new_in(parent).map_err(|e| BtfError::io(parent, e))
 }
 
 /// Renames a completed temporary folder to `path` (removing it if that fails).
-pub fn publish_dir(tmp: tempfile::TempDir, path: &Path) -> Result<()> {
-    let kept = tmp.keep();
-    std::fs::rename(&kept, path).map_err(|e| {
-        let _ = std::fs::remove_dir_all(&kept);
-        BtfError::io(path, e)
-    })
-}
-
-/// Temporary names start with `.btfmrf-partial-`; finished outputs get ordinary permissions
-/// (the temporary-file default, owner-only, would surprise users).
-fn partial_builder(#[allow(unused_variables)] mode: u32) -> tempfile::Builder<'static, 'static> {
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".btfmrf-partial-");
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(mode));
-    }
-    builder
+pub fn publish_dir(tmp: PartialDir, path: &Path) -> Result<()> {
+    tmp.publish(path).map_err(|e| BtfError::io(path, e))
 }
 
 /// The folder holding `path` ("." for a bare file name).
@@ -286,5 +355,5 @@ pub fn read_image(path: &Path) -> Result<Array3<f32>> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .ok_or_else(|| BtfError::parameter("path", format!("{} is not a file", path.display())))?;
-    Container::dir(parent).load_image(&name)
+    Container::user_dir(parent).load_image(&name)
 }

@@ -38,6 +38,8 @@ pub fn parse_lp(text: &str, path: &Path) -> Result<LightPositions> {
         line,
         reason,
     };
+    // Editors on Windows start files with a UTF-8 byte-order mark: not part of the count.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text
         .lines()
         .enumerate()
@@ -157,7 +159,7 @@ impl ImageSource for RtiSource {
 
 /// Opens an RTI capture from its `.lp` file: one view (the zenith), one light per listed image.
 pub(crate) fn open(lp_path: &Path) -> Result<Btf> {
-    let bytes = Container::dir(super::parent_dir(lp_path)).read(
+    let bytes = Container::user_dir(super::parent_dir(lp_path)).read(
         &lp_path
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
@@ -167,6 +169,7 @@ pub(crate) fn open(lp_path: &Path) -> Result<Btf> {
     let text = String::from_utf8_lossy(&bytes);
     let lp = parse_lp(&text, lp_path)?;
     let root = super::parent_dir(lp_path);
+    let container = Container::dir(root);
     for name in &lp.images {
         let p = root.join(name);
         if !p.is_file() {
@@ -175,8 +178,8 @@ pub(crate) fn open(lp_path: &Path) -> Result<Btf> {
                 format!("lists image '{name}', but {} does not exist", p.display()),
             ));
         }
+        container.check_inside(name)?;
     }
-    let container = Container::dir(root);
     let (width, height) = super::ubo2003::common_size(&container, &lp.images)?;
     let lights = DirectionSet::new(
         lp.directions

@@ -121,6 +121,7 @@ pub(crate) fn open(container: Container) -> Result<Btf> {
                 "image name does not end in the UBO2003 pattern 'tl<θ> pl<φ> tv<θ> pv<φ>'",
             )
         })?;
+        check_range(&angles).map_err(|e| BtfError::layout(container.describe(&name), e))?;
         entries.push((name, angles));
     }
     if entries.is_empty() {
@@ -130,60 +131,58 @@ pub(crate) fn open(container: Container) -> Result<Btf> {
         ));
     }
     let (views, lights) = direction_sets(&entries, &location)?;
-    let mut slots: Vec<Option<usize>> = vec![None; views.len() * lights.len()];
+    let (view_index, light_index) = (index_of(&views), index_of(&lights));
+    // Time and memory linear in the number of members: a map of the pairs present, never a
+    // table of every (view, light) pair (a hostile archive names thousands of each).
+    let mut slots: HashMap<(usize, usize), usize> = HashMap::with_capacity(entries.len());
     for (k, (name, angles)) in entries.iter().enumerate() {
         // The sets were built from these very names, so both lookups succeed.
         let not_in_set = || BtfError::layout(container.describe(name), "direction not in the set");
-        let v = views.find(&angles.view(), 1e-6).ok_or_else(not_in_set)?;
-        let l = lights.find(&angles.light(), 1e-6).ok_or_else(not_in_set)?;
-        let slot = &mut slots[v * lights.len() + l];
-        if let Some(prev) = slot {
+        let v = *view_index
+            .get(&key(angles.theta_v, angles.phi_v))
+            .ok_or_else(not_in_set)?;
+        let l = *light_index
+            .get(&key(angles.theta_l, angles.phi_l))
+            .ok_or_else(not_in_set)?;
+        if let Some(prev) = slots.insert((v, l), k) {
             return Err(BtfError::layout(
                 container.describe(name),
                 format!(
                     "duplicate direction: the same view and light as '{}'",
-                    entries[*prev].0
+                    entries[prev].0
                 ),
             ));
         }
-        *slot = Some(k);
     }
-    let missing: Vec<String> = slots
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| s.is_none())
-        .map(|(i, _)| {
-            let (v, l) = (
-                views.as_slice()[i / lights.len()],
-                lights.as_slice()[i % lights.len()],
-            );
-            format!(
-                "tl{:03} pl{:03} tv{:03} pv{:03}",
-                l.theta_deg, l.phi_deg, v.theta_deg, v.phi_deg
-            )
-        })
-        .collect();
-    if !missing.is_empty() {
-        let shown: Vec<&str> = missing.iter().take(5).map(String::as_str).collect();
+    let total = views.len().saturating_mul(lights.len());
+    if slots.len() < total {
+        // The first few missing pairs, for the message: at most slots.len() + 5 pairs visited.
+        let shown: Vec<String> = (0..total)
+            .map(|i| (i / lights.len(), i % lights.len()))
+            .filter(|vl| !slots.contains_key(vl))
+            .take(5)
+            .map(|(v, l)| {
+                let (v, l) = (views.as_slice()[v], lights.as_slice()[l]);
+                format!(
+                    "tl{:03} pl{:03} tv{:03} pv{:03}",
+                    l.theta_deg, l.phi_deg, v.theta_deg, v.phi_deg
+                )
+            })
+            .collect();
+        let missing = total - slots.len();
         return Err(BtfError::layout(
             &location,
             format!(
-                "{} of {} (view, light) images missing, e.g. {}{}",
-                missing.len(),
-                slots.len(),
+                "{missing} of {total} (view, light) images missing, e.g. {}{}",
                 shown.join(", "),
-                if missing.len() > shown.len() {
-                    ", ..."
-                } else {
-                    ""
-                }
+                if missing > shown.len() { ", ..." } else { "" }
             ),
         ));
     }
-    let names: Vec<String> = slots
-        .into_iter()
-        .map(|s| entries[s.expect("checked complete")].0.clone())
-        .collect();
+    let mut names = vec![String::new(); total];
+    for ((v, l), k) in slots {
+        names[v * lights.len() + l] = entries[k].0.clone();
+    }
     let (width, height) = common_size(&container, &names)?;
     let source = UboSource {
         container,
@@ -191,6 +190,37 @@ pub(crate) fn open(container: Container) -> Result<Btf> {
         names,
     };
     Btf::from_source(location, views, lights, width, height, Box::new(source))
+}
+
+/// Elevations above 90 degrees and azimuths of 360 or more are not directions a name may hold
+/// (`pv400` would otherwise be read as azimuth 40).
+fn check_range(a: &UboAngles) -> std::result::Result<(), String> {
+    for (field, value, max) in [
+        ("tl", a.theta_l, 90),
+        ("pl", a.phi_l, 359),
+        ("tv", a.theta_v, 90),
+        ("pv", a.phi_v, 359),
+    ] {
+        if value > max {
+            return Err(format!(
+                "angle {field}{value:03} is out of range (elevations 0..=90, azimuths 0..=359)"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// One key per whole-degree direction: at the zenith every azimuth is the same direction.
+fn key(theta: u32, phi: u32) -> (u32, u32) {
+    (theta, if theta == 0 { 0 } else { phi })
+}
+
+/// Index of each whole-degree direction of a set, by [`key`].
+fn index_of(set: &DirectionSet) -> HashMap<(u32, u32), usize> {
+    set.iter()
+        .enumerate()
+        .map(|(i, d)| (key(d.theta_deg.round() as u32, d.phi_deg.round() as u32), i))
+        .collect()
 }
 
 /// The view and light sets: the Bonn sets when the directions found are Bonn directions and
@@ -201,11 +231,12 @@ fn direction_sets(
     location: &str,
 ) -> Result<(DirectionSet, DirectionSet)> {
     let bonn = DirectionSet::bonn();
-    let pick = |dirs: Vec<Direction>| -> Result<DirectionSet> {
+    let pick = |angles: Vec<(u32, u32)>| -> Result<DirectionSet> {
+        let mut seen = std::collections::HashSet::new();
         let mut unique: Vec<Direction> = Vec::new();
-        for d in dirs {
-            if !unique.iter().any(|u| u.angle_to(&d) < 1e-6) {
-                unique.push(d);
+        for (theta, phi) in angles {
+            if seen.insert(key(theta, phi)) {
+                unique.push(Direction::new(f64::from(theta), f64::from(phi)));
             }
         }
         let all_bonn = unique.iter().all(|d| bonn.find(d, 1e-6).is_some());
@@ -219,8 +250,8 @@ fn direction_sets(
         });
         DirectionSet::new(unique).map_err(|e| BtfError::layout(location, e.to_string()))
     };
-    let views = pick(entries.iter().map(|(_, a)| a.view()).collect())?;
-    let lights = pick(entries.iter().map(|(_, a)| a.light()).collect())?;
+    let views = pick(entries.iter().map(|(_, a)| (a.theta_v, a.phi_v)).collect())?;
+    let lights = pick(entries.iter().map(|(_, a)| (a.theta_l, a.phi_l)).collect())?;
     Ok((views, lights))
 }
 
@@ -377,7 +408,7 @@ fn write_zip(
     let mut tmp = buffered.into_inner().map_err(|e| io_err(e.into_error()))?;
     tmp.as_file_mut().sync_all().map_err(io_err)?;
     tmp.rewind().map_err(io_err)?;
-    tmp.persist(out).map_err(|e| io_err(e.error))?;
+    tmp.persist(out).map_err(io_err)?;
     Ok(())
 }
 
