@@ -32,6 +32,17 @@ pub(crate) fn forward(real: &Array2<f64>) -> Array2<Complex64> {
     Array2::from_shape_vec((rows, cols), data).expect("rows x cols values")
 }
 
+/// Inverse 2D DFT, normalised by `1 / (rows * cols)`, complex (for analytic, one-sided
+/// spectra such as oriented pyramid bands).
+pub(crate) fn inverse(spectrum: &Array2<Complex64>) -> Array2<Complex64> {
+    let (rows, cols) = spectrum.dim();
+    let mut data: Vec<Complex64> = spectrum.iter().copied().collect();
+    transform(&mut data, rows, cols, true);
+    let n = data.len() as f64;
+    Array2::from_shape_vec((rows, cols), data.into_iter().map(|c| c / n).collect())
+        .expect("rows x cols values")
+}
+
 /// Inverse 2D DFT, normalised by `1 / (rows * cols)`; the real part.
 pub(crate) fn inverse_real(spectrum: &Array2<Complex64>) -> Array2<f64> {
     let (rows, cols) = spectrum.dim();

@@ -57,8 +57,14 @@ fn bench_writes_the_table_the_json_and_the_plots() {
         assert!((ratio - raw / bytes).abs() < 1e-6 * ratio, "{m}");
         assert!(m["analysis_seconds"].as_f64().unwrap() > 0.0, "{m}");
         assert!(m["synthesis_seconds"].as_f64().unwrap() > 0.0, "{m}");
-        let fidelity = m["fidelity"].as_f64().unwrap();
-        assert!(fidelity.is_finite() && fidelity >= 0.0, "{m}");
+        // The judge's figures, and the ratios are the structure over the levels.
+        let structure = m["structure"].as_f64().unwrap();
+        assert!(structure.is_finite() && structure > 0.0, "{m}");
+        let vs_crop = m["structure_vs_crop"].as_f64().unwrap();
+        let vs_rp = m["structure_vs_random_phase"].as_f64().unwrap();
+        assert!(vs_crop > 0.0 && vs_rp > 0.0, "{m}");
+        assert!(m["colour_lab"].as_f64().unwrap() >= 0.0, "{m}");
+        assert_eq!(m["colour_lab_channels"].as_array().unwrap().len(), 3, "{m}");
         // MRF synthesis is a new sample: no pixelwise error; the PCA methods have one.
         let is_mrf = ["gmrf", "2dcar", "3dcar"].contains(&m["name"].as_str().unwrap());
         assert_eq!(m["mean_delta_e"].is_null(), is_mrf, "{m}");
@@ -73,14 +79,46 @@ fn bench_writes_the_table_the_json_and_the_plots() {
     );
     assert_eq!(methods[3]["parameters"]["clusters"], 4);
 
+    // The reference levels, as rows of the JSON and of the table.
+    let levels: Vec<&str> = written["levels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        levels,
+        [
+            "measured",
+            "another crop",
+            "random phase",
+            "shuffled",
+            "blurred"
+        ]
+    );
+    let level = |i: usize, key: &str| written["levels"][i][key].as_f64().unwrap();
+    assert_eq!(level(0, "structure"), 0.0, "the reference against itself");
+    assert!((level(1, "structure_vs_crop") - 1.0).abs() < 1e-9);
+    assert!((level(2, "structure_vs_random_phase") - 1.0).abs() < 1e-9);
+
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    for level in &levels {
+        assert!(md.contains(&format!("| *{level}* |")), "level row {level}");
+    }
+    // The side-by-side sheet: measured + 7 methods of 32 px on top, 3 enlargements of 64 below.
+    let sheet = image::open(out.join("sheet.png")).expect("a PNG sheet");
+    assert_eq!(
+        (sheet.width(), sheet.height()),
+        (8 * 32 + 7 * 4, 32 + 4 + 64)
+    );
+    assert!(md.contains("(sheet.png)"), "report links the sheet");
     for name in names {
         assert!(md.contains(&format!("| {name} |")), "table row for {name}");
         assert!(md.contains(&format!("**{name} ")), "verdict for {name}");
     }
     for plot in [
-        "fidelity_vs_size.png",
-        "fidelity_vs_time.png",
+        "structure_vs_size.png",
+        "structure_vs_time.png",
         "delta_e_vs_size.png",
     ] {
         assert!(md.contains(plot), "report links {plot}");

@@ -2,8 +2,8 @@
 # Peer check: our MRF synthesis against the non-parametric `texture-synthesis` crate (Embark,
 # 0.8), enlarging the same measured image to 1024 x 1024. The peer is built in a scratch crate
 # under $TMPDIR (it is not a dependency of btfmrf). Input: the generated 256 x 256 sponge,
-# view (0, 0), light (45, 0). Prints both times and both texture-fidelity scores against the
-# measured image (0 = identical statistics).
+# view (0, 0), light (45, 0). Prints both times and the texture judge's figures for both against
+# the measured image, with the judge's reference levels (examples/fidelity.rs).
 # Usage: scripts/peers/texture_synthesis.sh
 set -euo pipefail
 cd "$(dirname "$0")/../.."

@@ -22,7 +22,7 @@ use super::{Bar, Global, emit, human_bytes};
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
-    /// The measured BTF: FILE.zip, a folder, or an RTI .lp file.
+    /// The measured BTF: FILE.zip, a folder, an RTI .lp file, or a photograph (PNG/JPEG/EXR).
     btf: PathBuf,
     /// The band model.
     #[arg(long, default_value = "2dcar")]

@@ -11,17 +11,21 @@ use super::{Bar, Global, emit};
 
 /// Run every method on the same BTF and report speed against error: analysis time, synthesis
 /// time of one 1024x1024 image, model size, compression ratio, mean CIE76 ΔE (methods that
-/// reproduce pixels) and texture fidelity (all methods; 0 = identical statistics).
+/// reproduce pixels) and the texture judge (all methods): structure distance, the same over
+/// the another-crop and random-phase reference levels, and colour (mean |Lab quantile
+/// difference|), with the reference levels (another crop, random phase, shuffled, blurred,
+/// and --other-material) as rows.
 ///
-/// Writes DIR/report.json (a list `methods`), DIR/report.md (the table and a sentence per
-/// method on where it wins) and PNG plots of fidelity and ΔE against model size and analysis
-/// time. DIR must not exist; it appears complete or not at all.
+/// Writes DIR/report.json (lists `methods` and `levels`), DIR/report.md (the table and a
+/// sentence per method on where it wins), DIR/sheet.png (measured, each method, the MRF
+/// enlargements side by side) and PNG plots of structure and ΔE against model size and
+/// analysis time. DIR must not exist; it appears complete or not at all.
 ///
 /// Example: btfmrf generate stones --size 64 --out stones.zip && btfmrf bench stones.zip --out bench
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
-    /// The measured BTF: FILE.zip, a folder, or an RTI .lp file.
+    /// The measured BTF: FILE.zip, a folder, an RTI .lp file, or a photograph (PNG/JPEG/EXR).
     btf: PathBuf,
     /// Output folder (must not exist).
     #[arg(long)]
@@ -32,7 +36,7 @@ pub struct Args {
     /// Side of the image whose synthesis is timed, pixels.
     #[arg(long, default_value_t = 1024)]
     synthesis_size: usize,
-    /// Measured (view, light) pairs over which fidelity is averaged.
+    /// Measured (view, light) pairs over which the judge's figures are averaged.
     #[arg(long, default_value_t = 8)]
     fidelity_pairs: usize,
     /// Local-PCA settings to run, each CLUSTERSxCOMPONENTS (repeat the option for several).
@@ -47,6 +51,9 @@ pub struct Args {
     /// Only the MRF models (no pixelwise baselines).
     #[arg(long)]
     mrf_only: bool,
+    /// An image of a different material, for the judge's other-material reference level.
+    #[arg(long, value_name = "IMAGE")]
+    other_material: Option<PathBuf>,
     /// Seed of every random step.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -91,15 +98,20 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         } else {
             baselines(&args.lpca, args.pca_btf, args.pca_rf)
         },
+        other_material: args
+            .other_material
+            .as_deref()
+            .map(btfmrf::btf::io::read_image)
+            .transpose()?,
     };
-    let report = bench::run(
+    let run = bench::run(
         &btf,
         &args.btf.display().to_string(),
         &options,
         &Bar::new(global),
-    )?
-    .report;
-    let plots = report.write(&args.out)?;
+    )?;
+    let report = run.report;
+    let plots = report.write(&args.out, &run.sheet)?;
     if args.json {
         emit(serde_json::to_string(&report)?)?;
     } else {

@@ -114,6 +114,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             .into_iter()
             .filter(|b| b.method != Method::Lpca || b.clusters == 8)
             .collect(),
+        other_material: Some(other_material(args.material, args.size, args.seed)?),
         ..BenchOptions::default()
     };
     let run = bench::run(
@@ -122,7 +123,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         &options,
         &bar,
     )?;
-    let plots = run.report.write(&dir.join("bench"))?;
+    let plots = run.report.write(&dir.join("bench"), &run.sheet)?;
     std::fs::create_dir(dir.join("models")).context("creating models/")?;
     for model in &run.baseline_models {
         let name = format!("{}.lpca", model.method().name());
@@ -263,6 +264,17 @@ fn renders(
     Ok(md)
 }
 
+/// The judge's different material: the next built-in material, frontal view and light.
+fn other_material(
+    material: SyntheticMaterial,
+    size: u32,
+    seed: u64,
+) -> anyhow::Result<Array3<f32>> {
+    let all = SyntheticMaterial::ALL;
+    let next = all[(all.iter().position(|&m| m == material).unwrap_or(0) + 1) % all.len()];
+    Ok(Btf::synthetic(next, size, seed)?.image(0, 0)?)
+}
+
 fn model_of(models: &[MaterialModel], kind: ModelKind) -> anyhow::Result<&MaterialModel> {
     models
         .iter()
@@ -391,6 +403,7 @@ fn report(
             .skip_while(|l| l.starts_with("# ") || l.is_empty())
             .collect::<Vec<_>>()
             .join("\n")
+            .replace("](sheet.png)", "](bench/sheet.png)")
             .trim_end(),
     );
     md.push_str("\n\n");

@@ -1,24 +1,26 @@
 //! The speed-against-error benchmark of every method on one BTF (issue "speed vs error"):
 //! analysis time, synthesis time of one 1024 x 1024 image, model size, compression ratio,
-//! pixelwise error where it means something, and texture fidelity for all.
+//! pixelwise error where it means something, and the texture judge for all.
 //!
 //! Pixelwise error (mean CIE76 ΔE) is reported only for the compression methods, which
 //! reproduce the measured pixels; a stochastic MRF synthesis is a new sample of the material,
-//! so its ΔE against the measurement would only measure that it is another sample. Texture
-//! fidelity ([`texture_fidelity`]) compares statistics and applies to every method: it is
-//! averaged over a fixed set of measured (view, light) pairs, each method's image for the pair
-//! against the measured one.
+//! so its ΔE against the measurement would only measure that it is another sample. The texture
+//! judge ([`Yardstick`]: structure and colour statistics, with reference levels from the
+//! measured image) applies to every method: it is averaged over a fixed set of measured
+//! (view, light) pairs, each method's image for the pair against the measured one, and the
+//! reference levels are averaged over the same pairs.
 
 use std::path::Path;
 use std::time::Instant;
 
-use ndarray::Array3;
+use ndarray::{Array3, s};
 
 use crate::analysis::{AnalysisOptions, analyze};
-use crate::btf::io::{publish_dir, temp_dir_beside, write_file_atomic};
+use crate::btf::io::{publish_dir, temp_dir_beside, write_file_atomic, write_image};
 use crate::btf::{Btf, Direction};
+use crate::eval::judge::{Verdict, Yardstick};
+use crate::eval::montage::montage;
 use crate::eval::plot::benchmark_plots;
-use crate::eval::texture_fidelity;
 use crate::lpca::{LpcaModel, LpcaOptions, Method};
 use crate::model::{MaterialModel, ModelKind, format};
 use crate::progress::Progress;
@@ -33,12 +35,14 @@ pub struct BenchOptions {
     pub clusters: usize,
     /// Side of the synthesized image that is timed, pixels (the issue asks for 1024).
     pub synthesis_side: usize,
-    /// Measured (view, light) pairs over which texture fidelity is averaged.
+    /// Measured (view, light) pairs over which the judge's figures are averaged.
     pub fidelity_pairs: usize,
     /// Seed of every random step.
     pub seed: u64,
     /// The pixelwise baselines: (method, clusters, components) each.
     pub baselines: Vec<Baseline>,
+    /// An image of a different material (any size), for the judge's other-material level.
+    pub other_material: Option<Array3<f32>>,
 }
 
 /// One pixelwise baseline of the benchmark: a PCA factorization and its size.
@@ -77,6 +81,7 @@ impl Default for BenchOptions {
             fidelity_pairs: 8,
             seed: 1,
             baselines: Baseline::defaults(),
+            other_material: None,
         }
     }
 }
@@ -98,13 +103,14 @@ pub struct MethodResult {
     pub compression_ratio: f64,
     /// Mean CIE76 ΔE over all measured images; `None` where pixelwise error is meaningless.
     pub mean_delta_e: Option<f64>,
-    /// Mean texture-fidelity score over the fidelity pairs (0 = identical statistics).
-    pub fidelity: f64,
+    /// The texture judge's figures, averaged over the judged pairs.
+    #[serde(flatten)]
+    pub judge: Verdict,
     /// How the synthesis time was measured (e.g. "reconstructed at 128^2, tiled").
     pub note: String,
 }
 
-/// The measured (view, light) pairs over which fidelity is averaged: `n` pairs spread evenly
+/// The measured (view, light) pairs over which the judge is averaged: `n` pairs spread evenly
 /// over the (view-major) pair index, so they cover frontal to grazing views and many lights.
 pub fn fidelity_pairs(btf: &Btf, n: usize) -> Vec<(usize, usize)> {
     let (views, lights) = (btf.views().len(), btf.lights().len());
@@ -119,24 +125,40 @@ pub fn fidelity_pairs(btf: &Btf, n: usize) -> Vec<(usize, usize)> {
         .collect()
 }
 
-/// Mean fidelity score of `image_for(view, light)` against the measured images.
+/// The judged (view, light) pairs, each with the yardstick of its measured image.
+pub type JudgedPairs = Vec<((usize, usize), Yardstick)>;
+
+/// Builds the yardstick of each measured pair (reference crops and levels).
 ///
 /// # Errors
-/// Reading a measured image or making the method's image failed.
-pub fn mean_fidelity(
-    btf: &Btf,
-    pairs: &[(usize, usize)],
-    mut image_for: impl FnMut(usize, usize) -> Result<Array3<f32>>,
-) -> Result<f64> {
-    let mut sum = 0.0;
-    for &(v, l) in pairs {
-        let measured = btf.image(v, l)?;
-        sum += texture_fidelity(&image_for(v, l)?, &measured).score;
-    }
-    Ok(sum / pairs.len().max(1) as f64)
+/// Reading a measured image failed, or it is too small for the judge.
+pub fn judged_pairs(btf: &Btf, options: &BenchOptions) -> Result<JudgedPairs> {
+    fidelity_pairs(btf, options.fidelity_pairs)
+        .into_iter()
+        .map(|(v, l)| {
+            let measured = btf.image(v, l)?;
+            let y = Yardstick::new(&measured, options.other_material.as_ref(), options.seed)?;
+            Ok(((v, l), y))
+        })
+        .collect()
 }
 
-/// Runs one MRF model (analysis, file size, timed synthesis, fidelity).
+/// The judge's mean verdict on `image_for(view, light)` over the judged pairs.
+///
+/// # Errors
+/// Making the method's image failed, or it is too small for the judge.
+pub fn mean_verdict(
+    pairs: &JudgedPairs,
+    mut image_for: impl FnMut(usize, usize) -> Result<Array3<f32>>,
+) -> Result<Verdict> {
+    let verdicts = pairs
+        .iter()
+        .map(|&((v, l), ref y)| y.judge(&image_for(v, l)?))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Verdict::mean(&verdicts).expect("at least one judged pair"))
+}
+
+/// Runs one MRF model (analysis, file size, timed synthesis, the judge).
 ///
 /// # Errors
 /// Analysis or synthesis failed.
@@ -144,6 +166,7 @@ pub fn bench_mrf(
     btf: &Btf,
     kind: ModelKind,
     options: &BenchOptions,
+    pairs: &JudgedPairs,
     progress: &dyn Progress,
 ) -> Result<(MethodResult, MaterialModel)> {
     let analysis = AnalysisOptions {
@@ -175,8 +198,7 @@ pub fn bench_mrf(
         ..big
     };
     let cache = model.synthesis_cache(&native)?;
-    let pairs = fidelity_pairs(btf, options.fidelity_pairs);
-    let fidelity = mean_fidelity(btf, &pairs, |v, l| {
+    let judge = mean_verdict(pairs, |v, l| {
         let (view, light) = pair_directions(btf, v, l);
         Ok(model.image_from_cache(&cache, &view, &light)?)
     })?;
@@ -191,7 +213,7 @@ pub fn bench_mrf(
         model_bytes,
         compression_ratio: btf.raw_bytes() as f64 / model_bytes as f64,
         mean_delta_e: None,
-        fidelity,
+        judge,
         note: format!("one {side}x{side} image, all subspaces it needs, relit"),
     };
     Ok((result, model))
@@ -206,7 +228,7 @@ fn pair_directions(btf: &Btf, view: usize, light: usize) -> (Direction, Directio
 }
 
 /// Runs one pixelwise baseline (fit, file size, timed reconstruction tiled to the synthesis
-/// size, ΔE over all images, fidelity).
+/// size, ΔE over all images, the judge).
 ///
 /// # Errors
 /// Fitting or reconstruction failed.
@@ -214,6 +236,7 @@ pub fn bench_baseline(
     btf: &Btf,
     baseline: &Baseline,
     options: &BenchOptions,
+    pairs: &JudgedPairs,
     progress: &dyn Progress,
 ) -> Result<(MethodResult, LpcaModel)> {
     let fit_options = LpcaOptions {
@@ -230,8 +253,7 @@ pub fn bench_baseline(
     let start = Instant::now();
     tile(&model.reconstruct(0, 0)?, side, side);
     let synthesis_seconds = start.elapsed().as_secs_f64();
-    let pairs = fidelity_pairs(btf, options.fidelity_pairs);
-    let fidelity = mean_fidelity(btf, &pairs, |v, l| Ok(model.reconstruct(v, l)?))?;
+    let judge = mean_verdict(pairs, |v, l| Ok(model.reconstruct(v, l)?))?;
     let parameters = match baseline.method {
         Method::Lpca => serde_json::json!({
             "clusters": baseline.clusters,
@@ -247,7 +269,7 @@ pub fn bench_baseline(
         model_bytes,
         compression_ratio: btf.raw_bytes() as f64 / model_bytes as f64,
         mean_delta_e: Some(report.mean_delta_e).filter(|e| e.is_finite()),
-        fidelity,
+        judge,
         note: format!(
             "one {}x{} image reconstructed, tiled to {side}x{side} (cannot enlarge)",
             btf.width(),
@@ -273,10 +295,54 @@ pub struct BenchReport {
     pub shape: [usize; 4],
     /// Raw 8-bit bytes of the input.
     pub raw_bytes: u64,
-    /// Measured (view, light) pairs over which fidelity was averaged.
+    /// Measured (view, light) pairs over which the judge's figures were averaged.
     pub fidelity_pairs: usize,
+    /// The judge's reference levels, averaged over the pairs: `measured` (the reference crop
+    /// itself: its chroma statistics), `another crop`, `random phase`, `shuffled`, `blurred`
+    /// and, where a different material was given, `other material`.
+    pub levels: Vec<LevelRow>,
     /// One row per method.
     pub methods: Vec<MethodResult>,
+}
+
+/// One reference level of the judge.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct LevelRow {
+    /// What the reference is.
+    pub name: String,
+    /// Its figures against the reference crop.
+    #[serde(flatten)]
+    pub verdict: Verdict,
+}
+
+/// The reference levels of every pair, averaged level by level.
+fn mean_levels(pairs: &JudgedPairs) -> Vec<LevelRow> {
+    let Some((_, first)) = pairs.first() else {
+        return Vec::new();
+    };
+    let mut names = vec!["measured"];
+    names.extend(first.levels().rows().iter().map(|(n, _)| *n));
+    names
+        .into_iter()
+        .enumerate()
+        .filter_map(|(i, name)| {
+            let verdicts: Vec<Verdict> = pairs
+                .iter()
+                .filter_map(|(_, y)| {
+                    let l = y.levels();
+                    if i == 0 {
+                        Some(l.measured)
+                    } else {
+                        l.rows().get(i - 1).map(|r| r.1)
+                    }
+                })
+                .collect();
+            Some(LevelRow {
+                name: name.to_string(),
+                verdict: Verdict::mean(&verdicts)?,
+            })
+        })
+        .collect()
 }
 
 impl BenchReport {
@@ -286,20 +352,26 @@ impl BenchReport {
         let mut md = format!(
             "# Speed against error: {}\n\n{v} views x {l} lights, {h}x{w} texels, {} raw \
              (8-bit RGB).\n\nΔE: mean CIE76 ΔE over all measured images (only for methods that \
-             reproduce pixels). Fidelity: mean texture-fidelity score against the measured \
-             images at {} fixed (view, light) pairs (0 = identical statistics; lower is \
-             better). Synthesis: see the notes under the table.\n\n",
+             reproduce pixels). The texture judge, averaged over {} fixed measured (view, light) \
+             pairs, compares each method's image with a crop of the measured one: structure \
+             (steerable-pyramid statistics of L*, 0 = identical, lower is better), the same \
+             over the another-crop level (x crop: 1 = as close as the same material) and over \
+             the random-phase level (x RP: 1 = as close as Gaussian noise with the measured \
+             spectrum), colour (mean |Lab quantile difference|, Lab units), and the std and \
+             kurtosis of a* of the image. The reference levels are rows in italics. Synthesis: \
+             see the notes under the table.\n\n",
             self.input,
             human(self.raw_bytes),
             self.fidelity_pairs,
         );
         md.push_str(
-            "| method | parameters | analysis s | synthesis s | model | ratio | ΔE | fidelity |\n\
-             |---|---|---:|---:|---:|---:|---:|---:|\n",
+            "| method | parameters | analysis s | synthesis s | model | ratio | ΔE | structure \
+             | x crop | x RP | colour Lab | a* std | a* kurtosis |\n\
+             |---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         for m in &self.methods {
             md.push_str(&format!(
-                "| {} | {} | {:.2} | {:.3} | {} | 1:{:.0} | {} | {:.3} |\n",
+                "| {} | {} | {:.2} | {:.3} | {} | 1:{:.0} | {} | {} |\n",
                 m.name,
                 compact(&m.parameters),
                 m.analysis_seconds,
@@ -308,7 +380,14 @@ impl BenchReport {
                 m.compression_ratio,
                 m.mean_delta_e
                     .map_or("-".to_string(), |e| format!("{e:.2}")),
-                m.fidelity,
+                judge_cells(&m.judge),
+            ));
+        }
+        for level in &self.levels {
+            md.push_str(&format!(
+                "| *{}* | reference level | - | - | - | - | - | {} |\n",
+                level.name,
+                judge_cells(&level.verdict)
             ));
         }
         md.push('\n');
@@ -326,6 +405,11 @@ impl BenchReport {
             md.push_str(&format!("- {line}\n"));
         }
         md.push('\n');
+        md.push_str(
+            "![side by side](sheet.png)\n\nTop: the measured image of the first judged pair, \
+             each MRF model's synthesis and each baseline's reconstruction; below: each MRF \
+             model's synthesis at twice the size.\n\n",
+        );
         for (title, file) in plots {
             md.push_str(&format!("![{title}]({file})\n\n"));
         }
@@ -343,7 +427,7 @@ impl BenchReport {
         let smallest = best(|m| m.model_bytes as f64);
         let fastest_fit = best(|m| m.analysis_seconds);
         let fastest_synth = best(|m| m.synthesis_seconds);
-        let most_faithful = best(|m| m.fidelity);
+        let most_faithful = best(|m| m.judge.judgement.structure);
         let least_error = best(|m| m.mean_delta_e.unwrap_or(f64::INFINITY));
         self.methods
             .iter()
@@ -360,7 +444,7 @@ impl BenchReport {
                     wins.push("fastest synthesis");
                 }
                 if is(&most_faithful) {
-                    wins.push("best texture fidelity");
+                    wins.push("closest structure");
                 }
                 if m.mean_delta_e.is_some() && is(&least_error) {
                     wins.push("lowest pixelwise error");
@@ -376,16 +460,34 @@ impl BenchReport {
                     format!("wins on: {}", wins.join(", "))
                 };
                 format!(
-                    "**{} {}**: {what}; {wins} ({} at 1:{:.0}, fidelity {:.3}).",
+                    "**{} {}**: {what}; {wins} ({} at 1:{:.0}, structure {:.3} = {:.2}x the \
+                     another-crop level, {:.2}x the random-phase level; colour {:.2} Lab).",
                     m.name,
                     compact(&m.parameters),
                     human(m.model_bytes),
                     m.compression_ratio,
-                    m.fidelity
+                    m.judge.judgement.structure,
+                    m.judge.structure_vs_crop,
+                    m.judge.structure_vs_random_phase,
+                    m.judge.judgement.colour_lab,
                 )
             })
             .collect()
     }
+}
+
+/// The judge's cells of a table row: structure, x crop, x RP, colour, a* std, a* kurtosis.
+fn judge_cells(v: &Verdict) -> String {
+    let j = &v.judgement;
+    format!(
+        "{:.3} | {:.2} | {:.2} | {:.2} | {:.2} | {:.1}",
+        j.structure,
+        v.structure_vs_crop,
+        v.structure_vs_random_phase,
+        j.colour_lab,
+        j.chroma_std[0],
+        j.chroma_kurtosis[0]
+    )
 }
 
 /// `{"clusters":20,"levels":3}` as `clusters=20 levels=3`.
@@ -417,6 +519,61 @@ pub struct BenchRun {
     pub mrf_models: Vec<MaterialModel>,
     /// The baselines' models, in the order of [`BenchOptions::baselines`].
     pub baseline_models: Vec<LpcaModel>,
+    /// The side-by-side sheet ([`side_by_side`]).
+    pub sheet: Array3<f32>,
+}
+
+/// The side-by-side sheet of the first judged pair: the measured image, each MRF model's
+/// synthesis and each baseline's reconstruction at the measured size, then each MRF model's
+/// enlargement (a synthesis at twice the size, shown at full resolution below).
+///
+/// # Errors
+/// Reading, synthesis or reconstruction failed.
+pub fn side_by_side(
+    btf: &Btf,
+    pairs: &JudgedPairs,
+    mrf_models: &[MaterialModel],
+    baseline_models: &[LpcaModel],
+    seed: u64,
+) -> Result<Array3<f32>> {
+    let (v, l) = pairs.first().map_or((0, 0), |p| p.0);
+    let (view, light) = pair_directions(btf, v, l);
+    let (h, w) = (btf.height() as usize, btf.width() as usize);
+    let at = |rows, cols| SynthesisOptions {
+        rows,
+        cols,
+        seed,
+        tileable: false,
+    };
+    let mut top = vec![btf.image(v, l)?];
+    for m in mrf_models {
+        top.push(m.synthesize_image(&view, &light, &at(h, w))?);
+    }
+    for m in baseline_models {
+        top.push(m.reconstruct(v, l)?);
+    }
+    let mut enlarged = Vec::new();
+    for m in mrf_models {
+        enlarged.push(m.synthesize_image(&view, &light, &at(2 * h, 2 * w))?);
+    }
+    let top: Vec<&Array3<f32>> = top.iter().collect();
+    let bottom: Vec<&Array3<f32>> = enlarged.iter().collect();
+    let first = montage(&[top], 4);
+    if bottom.is_empty() {
+        return Ok(first);
+    }
+    // Stacked by hand: a montage would enlarge the top row to the bottom row's height.
+    let second = montage(&[bottom], 4);
+    let (h1, h2) = (first.dim().1, second.dim().1);
+    let width = first.dim().2.max(second.dim().2);
+    let mut sheet = Array3::ones((3, h1 + 4 + h2, width));
+    sheet
+        .slice_mut(s![.., ..h1, ..first.dim().2])
+        .assign(&first);
+    sheet
+        .slice_mut(s![.., h1 + 4.., ..second.dim().2])
+        .assign(&second);
+    Ok(sheet)
 }
 
 /// Runs every method this build knows on `btf` and gathers the report. `input` names the BTF
@@ -430,19 +587,21 @@ pub fn run(
     options: &BenchOptions,
     progress: &dyn Progress,
 ) -> Result<BenchRun> {
+    let pairs = judged_pairs(btf, options)?;
     let mut methods = Vec::new();
     let mut mrf_models = Vec::new();
     for kind in ModelKind::ALL {
-        let (result, model) = bench_mrf(btf, kind, options, progress)?;
+        let (result, model) = bench_mrf(btf, kind, options, &pairs, progress)?;
         methods.push(result);
         mrf_models.push(model);
     }
     let mut baseline_models = Vec::new();
     for baseline in &options.baselines {
-        let (result, model) = bench_baseline(btf, baseline, options, progress)?;
+        let (result, model) = bench_baseline(btf, baseline, options, &pairs, progress)?;
         methods.push(result);
         baseline_models.push(model);
     }
+    let sheet = side_by_side(btf, &pairs, &mrf_models, &baseline_models, options.seed)?;
     let report = BenchReport {
         input: input.to_string(),
         shape: [
@@ -452,27 +611,31 @@ pub fn run(
             btf.width() as usize,
         ],
         raw_bytes: btf.raw_bytes(),
-        fidelity_pairs: fidelity_pairs(btf, options.fidelity_pairs).len(),
+        fidelity_pairs: pairs.len(),
+        levels: mean_levels(&pairs),
         methods,
     };
     Ok(BenchRun {
         report,
+        sheet,
         mrf_models,
         baseline_models,
     })
 }
 
 impl BenchReport {
-    /// Writes `dir/report.json`, `dir/report.md` and the plots; `dir` must not exist and
-    /// appears complete or not at all. Returns the (title, file name) of each plot.
+    /// Writes `dir/report.json`, `dir/report.md`, the side-by-side `dir/sheet.png` and the
+    /// plots; `dir` must not exist and appears complete or not at all. Returns the (title,
+    /// file name) of each plot.
     ///
     /// # Errors
     /// `dir` exists, or writing failed.
-    pub fn write(&self, dir: &Path) -> Result<Vec<(String, String)>> {
+    pub fn write(&self, dir: &Path, sheet: &Array3<f32>) -> Result<Vec<(String, String)>> {
         let tmp = temp_dir_beside(dir)?;
         let plots = benchmark_plots(self, tmp.path())?;
         let json = serde_json::to_string_pretty(self).expect("the report serializes");
         write_file_atomic(&tmp.path().join("report.json"), json.as_bytes())?;
+        write_image(&tmp.path().join("sheet.png"), sheet)?;
         let titles: Vec<(&str, &str)> = plots
             .iter()
             .map(|(t, f)| (t.as_str(), f.as_str()))

@@ -22,6 +22,9 @@ pub enum EvalError {
     /// Fitting or reconstructing a PCA baseline failed.
     #[error(transparent)]
     Lpca(#[from] LpcaError),
+    /// An image the texture judge cannot measure (too small, not colour).
+    #[error("{0}")]
+    Judge(String),
     /// Drawing a plot failed.
     #[error("{}: cannot draw the plot: {reason}", path.display())]
     Plot {

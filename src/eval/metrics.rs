@@ -1,5 +1,7 @@
-//! Texture fidelity without pixel correspondence (mrf_math.md sec. 6): stochastic synthesis
-//! cannot be compared pixel by pixel, so two textures are compared by their statistics.
+//! The cheap second-order criterion of mrf_math.md sec. 6 (the project's score before issue
+//! 11; the headline figure is now the structure-aware judge, [`super::judge`]): colour
+//! histograms and power spectra only, so a Gaussian noise with the right spectrum scores like
+//! the material. Kept as what a Gaussian MRF is supposed to reproduce.
 //!
 //! - **Colour**: the 1-Wasserstein distance between the CIE Lab marginals, per channel
 //!   (`sum_b |F_a[b] - F_b[b]| * bin width`, in Lab units), summed over L*, a*, b*.

@@ -1,5 +1,5 @@
 //! Scatter plots of the benchmark (plotters, drawn into memory and written as PNG): error or
-//! fidelity against model size and against analysis time, one labelled point per method.
+//! the judge's structure distance against model size and against analysis time, one labelled point per method.
 
 use std::path::Path;
 use std::sync::Once;
@@ -94,7 +94,7 @@ pub fn scatter(
     Ok(())
 }
 
-/// The benchmark's plots, written into `dir`: fidelity against model size and against analysis
+/// The benchmark's plots, written into `dir`: structure distance against model size and against analysis
 /// time for every method, and ΔE against model size for the methods that have one. Returns
 /// (title, file name) of each plot written.
 ///
@@ -118,16 +118,19 @@ pub fn benchmark_plots(report: &BenchReport, dir: &Path) -> Result<Vec<(String, 
     let kib = |m: &MethodResult| m.model_bytes as f64 / 1024.0;
     let plots: [(&str, &str, &str, Vec<Point>); 3] = [
         (
-            "fidelity_vs_size.png",
-            "Texture fidelity against model size (lower is better)",
+            "structure_vs_size.png",
+            "Structure distance (judge) against model size (lower is better)",
             "model size, KiB (log)",
-            points(kib, |m| Some(m.fidelity)),
+            points(kib, |m| Some(m.judge.judgement.structure)),
         ),
         (
-            "fidelity_vs_time.png",
-            "Texture fidelity against analysis time (lower is better)",
+            "structure_vs_time.png",
+            "Structure distance (judge) against analysis time (lower is better)",
             "analysis time, s (log)",
-            points(|m| m.analysis_seconds, |m| Some(m.fidelity)),
+            points(
+                |m| m.analysis_seconds,
+                |m| Some(m.judge.judgement.structure),
+            ),
         ),
         (
             "delta_e_vs_size.png",
@@ -144,7 +147,7 @@ pub fn benchmark_plots(report: &BenchReport, dir: &Path) -> Result<Vec<(String, 
         let y_desc = if file.starts_with("delta") {
             "mean ΔE"
         } else {
-            "fidelity score"
+            "structure distance"
         };
         scatter(&dir.join(file), title, x_desc, y_desc, &pts)?;
         written.push((title.to_string(), file.to_string()));

@@ -5,6 +5,7 @@
 pub(crate) mod envelope;
 pub mod image;
 pub mod partial;
+mod photo;
 pub mod rti;
 pub mod ubo2003;
 
@@ -30,12 +31,16 @@ pub const MAX_FILE_BYTES: u64 = 1 << 30;
 /// (a larger file grows the buffer as real bytes arrive).
 const MAX_RESERVE: u64 = 64 << 20;
 
-/// Opens a BTF: a zip archive, a UBO2003 folder, an RTI folder, or an RTI `.lp` file.
+/// Opens a BTF: a zip archive, a UBO2003 folder, an RTI folder, an RTI `.lp` file, or a
+/// photograph (a PNG/JPEG/EXR file, or a folder holding one): see [`photo`].
 pub(crate) fn open(path: &Path) -> Result<Btf> {
     let meta = std::fs::metadata(path).map_err(|e| BtfError::io(path, e))?;
     if meta.is_dir() {
         if let Some(lp) = rti::find_lp_file(path)? {
             return rti::open(&lp);
+        }
+        if let Some(btf) = photo::open_folder(path)? {
+            return Ok(btf);
         }
         return ubo2003::open(Container::dir(path));
     }
@@ -43,7 +48,20 @@ pub(crate) fn open(path: &Path) -> Result<Btf> {
     if lower.ends_with(".lp") {
         return rti::open(path);
     }
-    ubo2003::open(Container::zip(path)?)
+    if photo::is_photo(path) {
+        return photo::open_file(path);
+    }
+    let zip = Container::zip(path).map_err(|e| match e {
+        BtfError::Zip { source, .. } => BtfError::layout(
+            path.display(),
+            format!(
+                "expected a BTF zip archive, an RTI .lp file or a PNG/JPEG/EXR photograph, \
+                 but this is not a readable zip archive ({source}) nor an image"
+            ),
+        ),
+        other => other,
+    })?;
+    ubo2003::open(zip)
 }
 
 /// A place holding named files: a zip archive or a folder.

@@ -1,0 +1,92 @@
+//! Photographs as input (issue 11): a single PNG/JPEG/EXR file, or a folder holding one, is a
+//! one-view, one-light BTF for `info`, `analyze` and `synthesize`; several photographs without
+//! light directions and files that are neither BTF nor image are refused with one line that
+//! says what was expected.
+
+mod common;
+
+use std::path::PathBuf;
+
+use btfmrf::eval::Yardstick;
+use common::{fails, ok, s, temp};
+
+fn gravel() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/textures/gravel.png")
+}
+
+#[test]
+fn a_photograph_is_analysed_and_enlarged_end_to_end() {
+    let photo = gravel();
+    let info: serde_json::Value =
+        serde_json::from_str(&ok(&["info", s(&photo), "--json"])).unwrap();
+    assert_eq!(
+        (info["views"].clone(), info["lights"].clone()),
+        (1.into(), 1.into())
+    );
+    assert_eq!(
+        (info["width"].clone(), info["height"].clone()),
+        (512.into(), 512.into())
+    );
+
+    let dir = temp();
+    let model = dir.path().join("gravel.btfm");
+    ok(&[
+        "analyze",
+        s(&photo),
+        "--model",
+        "2dcar",
+        "--out",
+        s(&model),
+        "-q",
+    ]);
+    let big = dir.path().join("big.png");
+    ok(&[
+        "synthesize",
+        s(&model),
+        "--size",
+        "1024",
+        "--view",
+        "0,0",
+        "--light",
+        "0,0",
+        "--out",
+        s(&big),
+        "-q",
+    ]);
+    let enlarged = btfmrf::btf::io::read_image(&big).unwrap();
+    assert_eq!(enlarged.dim(), (3, 1024, 1024));
+    // The enlargement is judged against the photograph: its structure is finite and farther
+    // than another crop (a synthesis is not a copy), and its grey stays grey.
+    let measured = btfmrf::btf::io::read_image(&photo).unwrap();
+    let y = Yardstick::new(&measured, None, 1).unwrap();
+    let v = y.judge(&enlarged).unwrap();
+    println!("gravel 2dcar 1024^2: {v:?}");
+    assert!(
+        v.judgement.structure.is_finite() && v.structure_vs_crop > 1.0,
+        "{v:?}"
+    );
+    assert!(v.judgement.chroma_std.iter().all(|&c| c < 1.0), "{v:?}");
+}
+
+#[test]
+fn several_photographs_or_a_non_image_are_refused_with_what_was_expected() {
+    let dir = temp();
+    let folder = dir.path().join("photos");
+    std::fs::create_dir(&folder).unwrap();
+    std::fs::copy(gravel(), folder.join("a.png")).unwrap();
+    std::fs::copy(gravel(), folder.join("b.png")).unwrap();
+    let line = fails(&["info", s(&folder)]);
+    assert!(
+        line.contains("2 photographs") && line.contains("dirs.lp"),
+        "{line}"
+    );
+
+    let text = dir.path().join("notes.txt");
+    std::fs::write(&text, "not a texture").unwrap();
+    let line = fails(&["analyze", s(&text), "--out", s(&dir.path().join("x.btfm"))]);
+    assert!(
+        line.contains("notes.txt") && line.contains("PNG/JPEG/EXR photograph"),
+        "{line}"
+    );
+    assert!(!dir.path().join("x.btfm").exists());
+}
