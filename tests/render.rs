@@ -110,6 +110,7 @@ fn gpu_equals_the_cpu_reference_on_a_flat_plane() {
         mapping: Mapping::Bump,
         seed: 5,
         texture_size: Some(side),
+        tile: side,
         ..Default::default()
     };
     // Measured and unmeasured lights (the latter interpolated from 3 nearest).
@@ -225,6 +226,7 @@ fn golden_images_of_bump_and_displacement_mapping() {
                     mapping,
                     seed: 3,
                     texture_size: Some(128),
+                    tile: 128,
                     ..Default::default()
                 },
             )
@@ -250,13 +252,112 @@ fn golden_images_of_bump_and_displacement_mapping() {
     assert!(diff > 0.005, "bump and displacement differ by only {diff}");
 }
 
+/// Luminance (Rec. 709) of a planar linear RGB image, shape (rows, cols).
+fn luminance(image: &Array3<f32>) -> ndarray::Array2<f32> {
+    let c = |k: usize| image.index_axis(ndarray::Axis(0), k).to_owned();
+    c(0) * 0.2126 + c(1) * 0.7152 + c(2) * 0.0722
+}
+
+/// Means of the luminance over `block` x `block` pixel blocks that lie on the object (the
+/// same geometry in both images; most pixels lit, the relief's shadows are black), for both
+/// images.
+fn block_means(a: &Array3<f32>, b: &Array3<f32>, block: usize) -> (Vec<f32>, Vec<f32>) {
+    let (la, lb) = (luminance(a), luminance(b));
+    let (h, w) = la.dim();
+    let (mut ma, mut mb) = (Vec::new(), Vec::new());
+    for by in 0..h / block {
+        for bx in 0..w / block {
+            let cell = |l: &ndarray::Array2<f32>| {
+                l.slice(ndarray::s![
+                    by * block..(by + 1) * block,
+                    bx * block..(bx + 1) * block
+                ])
+                .to_owned()
+            };
+            let (ca, cb) = (cell(&la), cell(&lb));
+            if ca.iter().chain(cb.iter()).filter(|&&x| x > 0.0).count() > block * block * 3 / 2 {
+                ma.push(ca.mean().unwrap());
+                mb.push(cb.mean().unwrap());
+            }
+        }
+    }
+    (ma, mb)
+}
+
+fn std_of(v: &[f32]) -> f32 {
+    let n = v.len().max(1) as f32;
+    let mean = v.iter().sum::<f32>() / n;
+    (v.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / n).sqrt()
+}
+
+/// Issue 13 item 6: the relief's lateral scale and strength must not depend on the texture
+/// resolution (the renderer picks it from the screen footprint, so otherwise the material
+/// changes with distance). The same plane with textures of 128 and 256 texels: the
+/// low-passed images agree, and so does the luminance contrast over the plane.
+#[test]
+fn the_relief_does_not_change_with_the_texture_resolution() {
+    let Some(renderer) = renderer() else { return };
+    let model = golden_model();
+    let mesh = Mesh::plane(8, 1.0);
+    let scene = Scene {
+        camera: Camera::orbit(Direction::new(20.0, 270.0), 3.2),
+        light: Light {
+            direction: Direction::new(60.0, 300.0),
+            distance: None,
+        },
+        width: 256,
+        height: 256,
+    };
+    let render = |side| {
+        renderer
+            .render_model(
+                &model,
+                &mesh,
+                &scene,
+                &ModelRenderOptions {
+                    seed: 2,
+                    texture_size: Some(side),
+                    tile: 256,
+                    ..Default::default()
+                },
+            )
+            .unwrap()
+    };
+    let (coarse, fine) = (render(128), render(256));
+    assert_eq!(
+        (coarse.plan.texture_size, fine.plan.texture_size),
+        (128, 256)
+    );
+    // Blocks of 16 pixels hold about 16 texels of the 256-texel tile: the scale of the
+    // sponge's holes, which both resolutions resolve.
+    let (a, b) = block_means(&coarse.image, &fine.image, 16);
+    assert!(a.len() > 80, "{} blocks on the plane", a.len());
+    let diff: Vec<f32> = a.iter().zip(&b).map(|(x, y)| x - y).collect();
+    let rms = (diff.iter().map(|d| d * d).sum::<f32>() / diff.len() as f32).sqrt();
+    let spread = std_of(&b);
+    eprintln!("block means: rms difference {rms:.4}, std {spread:.4} (128 vs 256 texels)");
+    if rms > 0.35 * spread {
+        let path = write_diff("resolution", &coarse.image, &fine.image);
+        panic!(
+            "128 and 256 texels show different surfaces: rms {rms} against std {spread}; {}",
+            path.display()
+        );
+    }
+    // Bump strength: the contrast of the block means (the shading of the relief at the
+    // blocks' scale) agrees within 20%.
+    let ratio = std_of(&a) / spread;
+    eprintln!("contrast ratio {ratio:.3}");
+    assert!((0.8..1.25).contains(&ratio), "contrast ratio {ratio}");
+}
+
 #[test]
 fn renders_are_deterministic_and_the_light_matters() {
     let Some(renderer) = renderer() else { return };
     let model = golden_model();
-    let mesh = Mesh::sphere(32, 16, 1.0);
+    let mesh = Mesh::sphere(8, 1.0);
     let options = ModelRenderOptions {
         texture_size: Some(64),
+        tile: 64,
         ..Default::default()
     };
     let a = renderer
@@ -295,7 +396,7 @@ fn renders_are_deterministic_and_the_light_matters() {
 fn a_shared_cache_synthesizes_each_subspace_once_and_changes_nothing() {
     let Some(renderer) = renderer() else { return };
     let model = golden_model();
-    let mesh = Mesh::sphere(32, 16, 1.0);
+    let mesh = Mesh::sphere(8, 1.0);
     let cache = model
         .synthesis_cache(&SynthesisOptions {
             rows: 64,
@@ -341,6 +442,7 @@ fn a_shared_cache_synthesizes_each_subspace_once_and_changes_nothing() {
             &ModelRenderOptions {
                 seed: 9,
                 texture_size: Some(64),
+                tile: 64,
                 ..Default::default()
             },
         )
@@ -371,6 +473,8 @@ fn the_render_command_reports_what_it_synthesized() {
         "45,0",
         "--light-distance",
         "inf",
+        "--tile",
+        "64",
         "--json",
     ]);
     let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
@@ -378,7 +482,9 @@ fn the_render_command_reports_what_it_synthesized() {
     let total = report["subspaces_total"].as_u64().unwrap();
     assert_eq!(total, 8);
     assert!((1..total).contains(&used), "{report}");
-    let side = report["texture_size"].as_u64().unwrap();
+    let side = report["tile"].as_u64().unwrap();
+    assert_eq!(side, 64);
+    assert!(report["texture_size"].as_u64().unwrap() <= side, "{report}");
     assert_eq!(
         report["texels_synthesized"].as_u64().unwrap(),
         used * side * side
@@ -407,6 +513,8 @@ fn the_render_command_reports_what_it_synthesized() {
         obj.to_str().unwrap(),
         "--view",
         "10,270",
+        "--tile",
+        "64",
     ]);
     let image = io::read_image(&png).unwrap();
     let lit = image.iter().filter(|&&x| x > 0.01).count();
@@ -441,6 +549,10 @@ fn bad_render_input_gives_one_clear_error() {
     for side in ["3", "16384"] {
         let e = common::fails(&["render", model, "--out", out, "--texture-size", side]);
         assert!(e.contains("--texture-size"), "{e}");
+    }
+    for tile in ["48", "16384"] {
+        let e = common::fails(&["render", model, "--out", out, "--tile", tile]);
+        assert!(e.contains("--tile"), "{e}");
     }
     let e = common::fails(&["render", model, "--out", out, "--mapping", "wobble"]);
     assert!(e.contains("wobble"), "{e}");

@@ -16,8 +16,13 @@ use super::{Global, emit};
 /// Render a model on a mesh to an image, headless (works without a GPU through Mesa's
 /// software Vulkan driver, lavapipe).
 ///
-/// Only the subspace images the visible surface needs are synthesized, at the texture
-/// resolution its screen footprint asks for (a power of two, at most --max-texture-size).
+/// One texture repetition holds --tile measured texels (the material's physical scale on
+/// the mesh). Only the subspace images the visible surface needs are synthesized, always at
+/// --tile texels a side, then sampled on the GPU at the resolution the screen footprint asks
+/// for (a power of two, at most --max-texture-size and --tile): the relief looks the same at
+/// every distance and texture size. Cost: the synthesis dominates and grows with the square
+/// of --tile (4x per doubling) times the clusters the view touches; the texture size changes
+/// only the (small) GPU cost.
 /// An LPCA model (.lpca, told by its magic bytes; also pca-rf) is decoded per fragment on
 /// the GPU instead (--mapping lpca, the default for it): nothing is synthesized.
 ///
@@ -40,28 +45,39 @@ pub struct Args {
     /// sphere, plane, cloth, torus, or an OBJ file (with texture coordinates).
     #[arg(long, default_value = "sphere")]
     mesh: MeshKind,
-    /// bump or displacement (plain: one subspace image as a plain texture, for comparison);
-    /// lpca for .lpca models. Default: bump, or lpca for an .lpca model.
+    /// bump, displacement, plain (one subspace image as a plain texture, no view or light
+    /// dependence: the cost baseline) or lpca (.lpca models only). Default: bump, or lpca for
+    /// an .lpca model.
     #[arg(long)]
     mapping: Option<Mapping>,
     /// Camera direction "theta,phi" in degrees, seen from the object (phi 270 = in front).
     #[arg(long, value_parser = parse_direction, default_value = "30,270")]
     view: Direction,
-    /// Camera distance from the object's centre.
+    /// Camera distance from the object's centre, world units (the sphere's radius is 1, the
+    /// plane and cloth are 2 wide).
     #[arg(long, default_value_t = 3.5)]
     distance: f32,
     /// Light direction "theta,phi" in degrees, seen from the object.
     #[arg(long, value_parser = parse_direction, default_value = "45,300")]
     light: Direction,
-    /// Point-light distance from the object's centre ("inf": a directional light).
+    /// Point-light distance from the object's centre, world units like --distance; the
+    /// irradiance falls off with the inverse square of the distance, 1 at the centre ("inf":
+    /// a directional light, irradiance 1 everywhere).
     #[arg(long, default_value_t = 4.0)]
     light_distance: f32,
-    /// Fixed texture side (a power of two); default: from the screen footprint.
+    /// Fixed GPU texture side (a power of two; at most --tile, larger is clamped to it);
+    /// default: from the screen footprint. It sets how finely the tile is sampled, not how
+    /// large the material appears.
     #[arg(long)]
     texture_size: Option<usize>,
     /// Largest texture side chosen from the footprint.
     #[arg(long, default_value_t = 2048)]
     max_texture_size: usize,
+    /// Measured texels per texture repetition (a power of two): the material's physical
+    /// scale on the mesh, and the side at which subspace images and range map are
+    /// synthesized.
+    #[arg(long, value_name = "TEXELS", default_value_t = btfmrf::render::headless::DEFAULT_TILE)]
+    tile: usize,
     /// Texture repetitions per unit length of the built-in meshes.
     #[arg(long, default_value_t = 1.0)]
     repeats: f32,
@@ -179,6 +195,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                 seed: args.seed,
                 texture_size: args.texture_size,
                 max_texture_size: args.max_texture_size.clamp(32, 8192),
+                tile: args.tile,
             },
         )?
     };
@@ -194,6 +211,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             "width": width,
             "height": height,
             "texture_size": out.plan.texture_size,
+            "tile": out.tile,
             "clusters": out.plan.clusters,
             "subspaces_synthesized": out.subspaces_synthesized,
             "subspaces_total": out.subspaces_total,
@@ -214,7 +232,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         ))
     } else {
         emit(format!(
-            "wrote {} ({}x{}, {} on {}; {} of {} subspace images synthesized at {}^2 in {:.3} s, rendered in {:.3} s)",
+            "wrote {} ({}x{}, {} on {}; {} of {} subspace images synthesized at {}^2 in {:.3} s, sampled at {}^2, rendered in {:.3} s)",
             args.out.display(),
             width,
             height,
@@ -222,8 +240,9 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             out.adapter,
             out.subspaces_synthesized,
             out.subspaces_total,
-            out.plan.texture_size,
+            out.tile,
             out.synthesis_seconds,
+            out.plan.texture_size,
             out.render_seconds
         ))
     }

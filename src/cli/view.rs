@@ -31,7 +31,7 @@ pub struct Args {
     /// The first mesh (then M cycles through sphere, cloth, torus, plane).
     #[arg(long, default_value = "sphere")]
     mesh: MeshKind,
-    /// bump or displacement (switch with B / D).
+    /// bump or displacement (switch with B / D; plain and lpca are for `render` only).
     #[arg(long, default_value = "bump")]
     mapping: Mapping,
     /// Initial camera direction "theta,phi", degrees.
@@ -40,7 +40,9 @@ pub struct Args {
     /// Initial light direction "theta,phi", degrees.
     #[arg(long, value_parser = parse_direction, default_value = "45,300")]
     light: Direction,
-    /// Side of the synthesized textures (a power of two).
+    /// Measured texels per texture repetition (a power of two), like `render --tile`: the
+    /// material's scale on the mesh. Every cluster is synthesized at this side when the
+    /// window opens, so the start-up cost grows with its square times the clusters.
     #[arg(long, default_value_t = 256)]
     texture_size: usize,
     /// Seed of the synthesis.

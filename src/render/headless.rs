@@ -16,6 +16,9 @@ use crate::model::MaterialModel;
 use crate::synthesis::{SynthesisCache, SynthesisOptions};
 use rayon::prelude::*;
 
+/// The coarsest texture side the footprint may choose, texels.
+const MIN_TEXTURE_SIDE: usize = 16;
+
 /// The colour format of offscreen targets: linear float, read back exactly.
 pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
@@ -33,8 +36,10 @@ pub struct Renderer {
 pub struct RenderOutput {
     /// Linear RGB, planar (3, height, width).
     pub image: Array3<f32>,
-    /// The plan: clusters synthesized and texture side.
+    /// The plan: clusters synthesized and texture side on the GPU.
     pub plan: ScenePlan,
+    /// Side of the synthesized tile, measured texels (one texture repetition).
+    pub tile: usize,
     /// Subspace images in the model.
     pub subspaces_total: usize,
     /// Subspace images synthesized for this frame (all of the plan's, except those a cache
@@ -57,11 +62,21 @@ pub struct ModelRenderOptions {
     pub mapping: Mapping,
     /// Seed of the synthesis.
     pub seed: u64,
-    /// A fixed texture side (a power of two); `None` chooses it from the screen footprint.
+    /// A fixed texture side on the GPU (a power of two, at most `tile`); `None` chooses it
+    /// from the screen footprint. It sets how finely the tile is sampled, never how large
+    /// the material appears.
     pub texture_size: Option<usize>,
     /// The largest texture side chosen from the footprint.
     pub max_texture_size: usize,
+    /// Measured texels per texture repetition (a power of two): the material's physical
+    /// scale on the mesh. The subspace images and the range map are synthesized at this
+    /// side whatever the texture resolution, so the relief's lateral size and height per
+    /// unit of surface do not change with distance or `texture_size`.
+    pub tile: usize,
 }
+
+/// The default [`ModelRenderOptions::tile`], measured texels per texture repetition.
+pub const DEFAULT_TILE: usize = 512;
 
 impl Default for ModelRenderOptions {
     fn default() -> Self {
@@ -70,6 +85,7 @@ impl Default for ModelRenderOptions {
             seed: 1,
             texture_size: None,
             max_texture_size: 2048,
+            tile: DEFAULT_TILE,
         }
     }
 }
@@ -265,6 +281,7 @@ impl Renderer {
                 clusters: (0..model.clusters()).collect(),
                 texture_size: model.width(),
             },
+            tile: model.width(),
             subspaces_total: 0,
             subspaces_synthesized: 0,
             texels_synthesized: 0,
@@ -328,7 +345,8 @@ impl Renderer {
     }
 
     /// The whole job: plans the scene, synthesizes exactly the subspace images it needs
-    /// (tileable, at the planned size), uploads them and renders one frame.
+    /// (tileable, at the tile's side), uploads them at the planned resolution and renders
+    /// one frame.
     ///
     /// # Errors
     /// An invalid size, a synthesis error or a device error.
@@ -353,12 +371,24 @@ impl Renderer {
             DirectionLut::new(&model.lights)?,
         );
         let min_side = model.min_synthesis_side().max(32);
+        let tile = options.tile;
+        if !tile.is_power_of_two() || !(min_side..=MAX_RENDER_SIDE as usize).contains(&tile) {
+            return Err(RenderError::parameter(
+                "--tile",
+                format!("{tile} is not a power of two within {min_side}..={MAX_RENDER_SIDE}"),
+            ));
+        }
+        // The footprint picks how finely the tile is sampled, never more finely than the
+        // tile's own texels.
         let mut plan = plan_scene(
             model,
             mesh,
             scene,
             (&luts.0, &luts.1),
-            (min_side, options.max_texture_size),
+            (
+                MIN_TEXTURE_SIDE.min(tile),
+                options.max_texture_size.min(tile),
+            ),
         );
         if let Some(side) = options.texture_size {
             if side == 0 || !side.is_power_of_two() || side > MAX_RENDER_SIDE as usize {
@@ -367,12 +397,11 @@ impl Renderer {
                     format!("{side} is not a power of two within 1..={MAX_RENDER_SIDE}"),
                 ));
             }
-            plan.texture_size = side.max(min_side);
+            plan.texture_size = side.min(tile);
         }
-        let size = plan.texture_size;
         let synthesis = SynthesisOptions {
-            rows: size,
-            cols: size,
+            rows: tile,
+            cols: tile,
             seed: options.seed,
             tileable: true,
         };
@@ -462,7 +491,8 @@ impl Renderer {
             Mapping::Displacement => model.range_heights(rows, cols, cache.options().tileable),
             _ => None,
         };
-        let tables = MaterialTables::new(model, cache, Some(luts))?;
+        let tables =
+            MaterialTables::new(model, cache, Some(luts))?.at_resolution(plan.texture_size)?;
         let synthesis_seconds = start.elapsed().as_secs_f64();
         let start = Instant::now();
         let material =
@@ -475,6 +505,7 @@ impl Renderer {
             subspaces_synthesized: synthesized,
             texels_synthesized: (synthesized * rows * cols) as u64,
             plan,
+            tile: rows,
             subspaces_total: model.subspaces.len(),
             synthesis_seconds,
             render_seconds,

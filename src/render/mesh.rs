@@ -57,7 +57,7 @@ pub struct Mesh {
 /// Which mesh to render.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum MeshKind {
-    /// A unit sphere.
+    /// A unit sphere (an inflated cube, see [`Mesh::sphere`]).
     Sphere,
     /// A 2 x 2 square in the xz plane, normal +y.
     Plane,
@@ -104,7 +104,7 @@ impl MeshKind {
     pub fn build(&self, detail: u32, repeats: f32) -> Result<Mesh> {
         let n = detail.clamp(4, 2048);
         Ok(match self {
-            MeshKind::Sphere => Mesh::sphere(n, (n / 2).max(2), repeats),
+            MeshKind::Sphere => Mesh::sphere((n / 4).max(2), repeats),
             MeshKind::Plane => Mesh::plane(n, repeats),
             MeshKind::Cloth => Mesh::cloth(n, repeats),
             MeshKind::Torus => Mesh::torus(n, (n * 2 / 5).max(3), repeats),
@@ -183,18 +183,49 @@ impl Mesh {
         }
     }
 
-    /// A unit sphere: `segments` around, `rings` from pole to pole; the texture repeats
-    /// `2 * repeats` times (rounded to a whole number, so that the seam is seamless) around
-    /// the equator and `repeats` times pole to pole.
-    pub fn sphere(segments: u32, rings: u32, repeats: f32) -> Self {
-        use std::f32::consts::PI;
-        let around = (2.0 * repeats).round().max(1.0);
-        Self::grid(segments, rings, (around, repeats), |s, t| {
-            let (st, ct) = (PI * t).sin_cos();
-            let (sp, cp) = (2.0 * PI * s).sin_cos();
-            let p = [st * cp, ct, -st * sp];
-            (p, p)
-        })
+    /// A unit sphere as an inflated cube: each of the 6 faces a `cells` x `cells` grid,
+    /// spaced by equal angles so that texels keep nearly one size everywhere (a latitude-
+    /// longitude grid squeezes the texture into a point at the poles). Each face holds a
+    /// whole number of texture repetitions, about `repeats` per 2 units of length like the
+    /// plane, so the tileable texture runs on seamlessly across the 4 faces around the
+    /// equator and from the front one (+z) onto the top and bottom; across the other 6 edges
+    /// the tile meets itself turned by a quarter or half turn (a faint seam in the texture,
+    /// and with displacement mapping a crack, since the heights on both sides differ).
+    pub fn sphere(cells: u32, repeats: f32) -> Self {
+        use std::f32::consts::FRAC_PI_4;
+        // A face edge is a quarter of the equator, pi / 2 long.
+        let k = (repeats * FRAC_PI_4).round().max(1.0);
+        let side = |phi: f32| {
+            let (sp, cp) = phi.to_radians().sin_cos();
+            ([cp, 0.0, -sp], [-sp, 0.0, -cp], [0.0, -1.0, 0.0])
+        };
+        // (centre, u axis, v axis) per face: the 4 around the equator (u eastwards, v down),
+        // then top and bottom, joined without a seam to the side face at +z (the one the
+        // default camera, phi = 270, looks at).
+        let faces = [
+            side(0.0),
+            side(90.0),
+            side(180.0),
+            side(270.0),
+            ([0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+            ([0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]),
+        ];
+        let mut mesh = Mesh {
+            vertices: Vec::new(),
+            indices: Vec::new(),
+        };
+        for (n, u, v) in faces {
+            let face = Self::grid(cells, cells, (k, k), |s, t| {
+                let a = (FRAC_PI_4 * (2.0 * s - 1.0)).tan();
+                let b = (FRAC_PI_4 * (2.0 * t - 1.0)).tan();
+                let p = normalize([0, 1, 2].map(|i| n[i] + a * u[i] + b * v[i])).unwrap_or(n);
+                (p, p)
+            });
+            let base = mesh.vertices.len() as u32;
+            mesh.vertices.extend(face.vertices);
+            mesh.indices.extend(face.indices.iter().map(|i| base + i));
+        }
+        mesh
     }
 
     /// A 2 x 2 square in the xz plane facing +y, `cells` x `cells` quads; u along +x, v along
@@ -520,7 +551,7 @@ mod tests {
     #[test]
     fn closed_meshes_wrap_a_whole_number_of_tiles() {
         for repeats in [0.7f32, 1.0, 2.3] {
-            for mesh in [Mesh::sphere(16, 8, repeats), Mesh::torus(16, 8, repeats)] {
+            for mesh in [Mesh::sphere(4, repeats), Mesh::torus(16, 8, repeats)] {
                 let max_u = mesh.vertices.iter().map(|v| v.uv[0]).fold(0.0f32, f32::max);
                 assert!(max_u >= 1.0 && max_u.fract() == 0.0, "{max_u}");
             }
@@ -531,6 +562,28 @@ mod tests {
                 .map(|v| v.uv[1])
                 .fold(0.0f32, f32::max);
             assert!(max_v >= 1.0 && max_v.fract() == 0.0, "{max_v}");
+        }
+    }
+
+    /// Texture repetitions per world unit over the sphere's triangles: a mapping that
+    /// collapses (latitude-longitude at the poles) makes this spread without bound.
+    #[test]
+    fn the_sphere_texture_keeps_nearly_one_scale_everywhere() {
+        let mesh = Mesh::sphere(16, 1.0);
+        let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
+        for tri in mesh.indices.chunks_exact(3) {
+            let [a, b, c] = [tri[0], tri[1], tri[2]].map(|i| mesh.vertices[i as usize]);
+            let f = cross(sub(b.position, a.position), sub(c.position, a.position));
+            let world = dot(f, f).sqrt();
+            let (s1, t1) = (b.uv[0] - a.uv[0], b.uv[1] - a.uv[1]);
+            let (s2, t2) = (c.uv[0] - a.uv[0], c.uv[1] - a.uv[1]);
+            let density = ((s1 * t2 - s2 * t1).abs() / world).sqrt();
+            lo = lo.min(density);
+            hi = hi.max(density);
+        }
+        assert!(hi / lo < 1.6, "texture density from {lo} to {hi} per unit");
+        for v in &mesh.vertices {
+            assert!((dot(v.position, v.position) - 1.0).abs() < 1e-5);
         }
     }
 

@@ -91,8 +91,12 @@ impl GpuMesh {
 /// The CPU side of a material on the GPU: what [`GpuMaterial::new`] uploads.
 #[derive(Debug, Clone)]
 pub struct MaterialTables {
-    /// Texture side, texels.
+    /// Texture side on the GPU, texels: the synthesized tile ([`MaterialTables::tile`])
+    /// box-filtered down by a power of two (the screen footprint asks for no more).
     pub size: usize,
+    /// Side of the synthesized tile, measured texels: what one texture repetition holds on
+    /// the mesh, whatever [`MaterialTables::size`] samples it at.
+    pub tile: usize,
     /// Clusters with a texture layer, in layer order.
     pub clusters: Vec<usize>,
     /// Per (view * lights + light), the texture layer of its cluster or `u32::MAX`.
@@ -138,6 +142,7 @@ impl MaterialTables {
             .collect();
         Ok(Self {
             size: cache.options().rows,
+            tile: cache.options().rows,
             clusters,
             pair_layer,
             counts: (nv, nl),
@@ -146,6 +151,29 @@ impl MaterialTables {
             mean_shading: cache.normals().map(MeanShading::new),
         })
     }
+
+    /// The same tables with the tile sampled at `side` texels on the GPU (a power-of-two
+    /// fraction of the tile, at least 1).
+    ///
+    /// # Errors
+    /// A `side` that is not the tile divided by a power of two.
+    pub fn at_resolution(mut self, side: usize) -> Result<Self> {
+        if side == 0
+            || side > self.tile
+            || !(self.tile / side).is_power_of_two()
+            || !self.tile.is_multiple_of(side)
+        {
+            return Err(RenderError::parameter(
+                "--texture-size",
+                format!(
+                    "{side} is not the {}-texel tile divided by a power of two",
+                    self.tile
+                ),
+            ));
+        }
+        self.size = side;
+        Ok(self)
+    }
 }
 
 /// A material's textures, tables and uniforms on the GPU, bound as group 0.
@@ -153,8 +181,10 @@ impl MaterialTables {
 pub struct GpuMaterial {
     uniforms: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
-    /// Texture side, texels.
+    /// Texture side on the GPU, texels.
     pub size: usize,
+    /// Side of the synthesized tile, measured texels (the unit of the range map's heights).
+    pub tile: usize,
     /// Measured views and lights.
     pub counts: (usize, usize),
     /// True when the model has a range map.
@@ -167,8 +197,14 @@ pub fn mip_levels(side: usize) -> u32 {
 }
 
 /// One layer's texels and its mip chain (2 x 2 box filter; odd sides clamp), as RGBA f16
-/// bytes, finest level first, appended to `out`.
-fn push_mip_chain(out: &mut Vec<u8>, side: usize, texel: impl Fn(usize, usize) -> [f32; 4]) {
+/// bytes, finest level first, appended to `out`; the first `skip` levels are made but not
+/// written (the texture then starts at side `side >> skip`, the same surface coarser).
+fn push_mip_chain(
+    out: &mut Vec<u8>,
+    side: usize,
+    skip: u32,
+    texel: impl Fn(usize, usize) -> [f32; 4],
+) {
     let mut level: Vec<[f32; 4]> = (0..side * side)
         .map(|i| texel(i / side, i % side))
         .collect();
@@ -186,6 +222,9 @@ fn push_mip_chain(out: &mut Vec<u8>, side: usize, texel: impl Fn(usize, usize) -
                 .collect();
             level = next;
             n = m;
+        }
+        if l < skip {
+            continue;
         }
         for t in &level {
             for v in t {
@@ -222,7 +261,9 @@ impl GpuMaterial {
         }
         // A layer of zeros stands in when nothing was synthesized (the plain pipeline samples
         // layer 0; the MRF pipelines skip missing layers).
-        let zero = Array3::<f32>::zeros((3, size, size));
+        let tile = tables.tile;
+        let skip = (tile / size.max(1)).trailing_zeros();
+        let zero = Array3::<f32>::zeros((3, tile, tile));
         let mut planes: Vec<&Array3<f32>> = tables
             .clusters
             .iter()
@@ -255,7 +296,7 @@ impl GpuMaterial {
         };
         let mut sub_data = Vec::new();
         for p in &planes {
-            push_mip_chain(&mut sub_data, size, |y, x| {
+            push_mip_chain(&mut sub_data, tile, skip, |y, x| {
                 [p[[0, y, x]], p[[1, y, x]], p[[2, y, x]], 1.0]
             });
         }
@@ -269,12 +310,12 @@ impl GpuMaterial {
         match cache.normals() {
             Some(n) => {
                 let mean = heights.map_or(0.0, |h| h.mean().unwrap_or(0.0));
-                push_mip_chain(&mut relief_data, size, |y, x| {
+                push_mip_chain(&mut relief_data, tile, skip, |y, x| {
                     let h = heights.map_or(0.0, |h| h[[y, x]] - mean);
                     [n[[0, y, x]], n[[1, y, x]], n[[2, y, x]], h].map(|v| v as f32)
                 });
             }
-            None => push_mip_chain(&mut relief_data, size, |_, _| [0.0, 0.0, 1.0, 0.0]),
+            None => push_mip_chain(&mut relief_data, tile, skip, |_, _| [0.0, 0.0, 1.0, 0.0]),
         }
         let relief = ctx.checked("relief texture", || texture("relief", 1, &relief_data))?;
         let storage = |label, bytes: &[u8]| {
@@ -358,6 +399,7 @@ impl GpuMaterial {
             uniforms,
             bind_group,
             size,
+            tile,
             counts: tables.counts,
             has_relief,
         })
@@ -373,7 +415,7 @@ impl GpuMaterial {
             params: [
                 scene.light.distance.map_or(1.0, |d| d * d),
                 if self.has_relief { 1.0 } else { 0.0 },
-                mesh.world_per_uv / self.size as f32,
+                mesh.world_per_uv / self.tile as f32,
                 plain_layer as f32,
             ],
             counts: [self.counts.0 as u32, self.counts.1 as u32, 0, 0],
@@ -579,5 +621,35 @@ impl Pipelines {
         pass.set_vertex_buffer(0, mesh.vertices.slice(..));
         pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
         pass.draw_indexed(0..mesh.count, 0, 0..1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chain(side: usize, skip: u32) -> Vec<f32> {
+        let mut bytes = Vec::new();
+        push_mip_chain(&mut bytes, side, skip, |y, x| {
+            [(y * side + x) as f32 / 64.0, y as f32, x as f32, 1.0]
+        });
+        bytes
+            .chunks_exact(2)
+            .map(|b| f16::from_le_bytes([b[0], b[1]]).to_f32())
+            .collect()
+    }
+
+    #[test]
+    fn a_coarser_texture_is_the_tail_of_the_full_mip_chain() {
+        let full = chain(8, 0);
+        // 8x8 + 4x4 + 2x2 + 1x1 texels of 4 channels.
+        assert_eq!(full.len(), 4 * (64 + 16 + 4 + 1));
+        let coarse = chain(8, 1);
+        assert_eq!(coarse.len(), 4 * (16 + 4 + 1));
+        assert_eq!(coarse[..], full[4 * 64..]);
+        // The first coarse texel is the mean of the 2x2 block at the origin.
+        assert_eq!(coarse[1], 0.5);
+        assert_eq!(coarse[2], 0.5);
+        assert_eq!(coarse[0], (0.0 + 1.0 + 8.0 + 9.0) / 4.0 / 64.0);
     }
 }

@@ -19,7 +19,8 @@ use crate::model::MaterialModel;
 pub struct ScenePlan {
     /// The clusters (subspace images) the visible surface draws on, ascending.
     pub clusters: Vec<usize>,
-    /// Texture side, texels: the power of two nearest (on a log scale) to the largest screen
+    /// Texture side on the GPU, texels (how finely one repetition is sampled, not what it
+    /// holds): the power of two nearest (on a log scale) to the largest screen
     /// footprint of one texture repetition, in pixels, within `[min, max]` of [`plan_scene`].
     pub texture_size: usize,
 }
@@ -208,7 +209,7 @@ mod tests {
         // One repetition covers 256 pixels.
         assert_eq!(plan.texture_size, 256);
         // A sphere seen from an angle touches more light directions than a plane.
-        let sphere = Mesh::sphere(32, 16, 1.0);
+        let sphere = Mesh::sphere(8, 1.0);
         let wide = plan_scene(&model, &sphere, &scene, (&luts.0, &luts.1), (32, 4096));
         assert!(plan.clusters.len() < 4);
         assert_eq!(wide.clusters, vec![0, 1, 2, 3]);
