@@ -480,7 +480,7 @@ fn estimates_bound_the_measured_peaks() {
         s(&model),
         "--out",
         s(&dir.path().join("r.png")),
-        "--texture-size",
+        "--tile",
         "512",
         "--size",
         "256",
@@ -491,7 +491,7 @@ fn estimates_bound_the_measured_peaks() {
     }
     assert_eq!(code, 0, "{err}");
     check_estimate(
-        "render, 512^2 texture",
+        "render, 512^2 tile",
         btfmrf::memory::render_bytes(256 * 256, 512, all),
         peak,
     );

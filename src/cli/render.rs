@@ -163,9 +163,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         Renderer::new()?.render_lpca(&model, &mesh, &scene)?
     } else {
         let model = format::read(&args.model)?;
-        let texture = args
-            .texture_size
-            .unwrap_or(args.max_texture_size.clamp(32, 8192));
+        // The subspace images are synthesized at the tile's side, whatever the texture size.
+        let texture = args.tile;
         let need = |side| {
             memory::render_bytes(
                 width as usize * height as usize,
@@ -174,7 +173,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             )
         };
         global.check_memory(
-            format!("render with a {texture}^2 texture"),
+            format!("render with a {texture}^2 tile"),
             need(texture),
             |budget| {
                 let fits = (5..=13)
@@ -182,7 +181,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                     .rev()
                     .find(|&s| need(s) <= budget);
                 fits.map_or("nothing fits".into(), |s| {
-                    format!("--texture-size {s} fits")
+                    format!("--tile {s} fits")
                 })
             },
         )?;
