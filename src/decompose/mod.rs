@@ -7,5 +7,5 @@ pub mod marginals;
 pub mod pyramid;
 
 pub use cluster::{ClusterOptions, SubspaceClustering};
-pub use kl::KlBasis;
+pub use kl::{ColourSpace, KlBasis};
 pub use pyramid::{Border, Pyramid};
