@@ -6,13 +6,14 @@ use ndarray::{Array3, Axis, stack};
 use rayon::prelude::*;
 
 use crate::btf::Btf;
-use crate::decompose::marginals::{self, Quantiles};
+use crate::decompose::marginals::{self, QuantileGrid, Quantiles};
 use crate::decompose::pyramid::auto_levels;
 use crate::decompose::stationarity::{NON_STATIONARY_SHARE, block_mean_share};
-use crate::decompose::{ClusterOptions, KlBasis, Pyramid, SubspaceClustering};
+use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceClustering};
 use crate::geometry;
 use crate::model::{
-    BandModel, LevelModel, MaterialModel, ModelError, ModelKind, RangeMap, Result, SubspaceModel,
+    BandMarginals, BandModel, LevelModel, MaterialModel, ModelError, ModelKind, RangeMap, Result,
+    SubspaceModel,
 };
 use crate::mrf::{
     Car2dModel, Car3dModel, GmrfModel, car3d::MAX_ORDER_3D, neighbourhood::MAX_ORDER,
@@ -36,6 +37,11 @@ pub struct AnalysisOptions {
     /// Estimate a range map by photometric stereo (needs 3 or more usable lights in the
     /// frontal view). Default: true.
     pub range_map: bool,
+    /// The colour coordinates of the KL decorrelation (the 3D CAR models them jointly).
+    /// Default: CIE Lab.
+    pub colour_space: ColourSpace,
+    /// Store a quantile table per pyramid band and match each synthesized band to it.
+    pub band_marginals: bool,
 }
 
 /// Largest stored range-map side, samples; larger maps are averaged down (a 128 x 128 map is
@@ -51,6 +57,8 @@ impl Default for AnalysisOptions {
             max_order: MAX_ORDER,
             seed: 1,
             range_map: true,
+            colour_space: ColourSpace::Lab,
+            band_marginals: false,
         }
     }
 }
@@ -119,8 +127,7 @@ pub fn analyze(
         .enumerate()
         .map(|(k, &(v, l))| {
             let image = btf.image(v, l)?;
-            let (kl, marginals, levels, notes) =
-                fit_subspace(&image, options.kind, levels, options.max_order);
+            let (subspace, notes) = fit_subspace(&image, options, levels);
             progress.advance(1);
             let notes = notes
                 .into_iter()
@@ -129,9 +136,7 @@ pub fn analyze(
             Ok((
                 SubspaceModel {
                     representative: (v as u16, l as u16),
-                    kl,
-                    marginals,
-                    levels,
+                    ..subspace
                 },
                 notes,
             ))
@@ -213,24 +218,38 @@ fn estimate_range_map(
 }
 
 /// Fits one subspace image: its colour basis (the identity for the 3D CAR, which models the
-/// channels jointly), the quantiles of its factor planes, its level models, and repair notes.
+/// channels jointly), the quantiles of its factor planes and (optionally) of its bands, its
+/// level models, and repair notes. The representative is left at (0, 0).
 fn fit_subspace(
     image: &Array3<f32>,
-    kind: ModelKind,
+    options: &AnalysisOptions,
     levels: usize,
-    max_order: usize,
-) -> (KlBasis, [Quantiles; 3], Vec<LevelModel>, Vec<String>) {
+) -> (SubspaceModel, Vec<String>) {
+    let (kind, max_order) = (options.kind, options.max_order);
     let kl = match kind {
-        ModelKind::Car3d => KlBasis::identity(),
-        ModelKind::Car2d | ModelKind::Gmrf => KlBasis::fit(image),
+        ModelKind::Car3d => KlBasis::identity(options.colour_space),
+        ModelKind::Car2d | ModelKind::Gmrf => KlBasis::fit(image, options.colour_space),
     };
     let factors = kl.forward(image);
-    let marginals = factors.each_ref().map(marginals::quantiles);
+    let grid = QuantileGrid::NormalTails;
+    let marginals: [Quantiles; 3] = factors.each_ref().map(|f| marginals::quantiles(f, grid));
     let pyramids: Vec<Pyramid> = factors
         .iter()
         .map(|f| Pyramid::decompose(f, levels))
         .collect();
     let n_levels = pyramids[0].bands.len();
+    let band_marginals = options.band_marginals.then(|| {
+        let probabilities = marginals::band_probabilities();
+        BandMarginals {
+            tables: (0..n_levels)
+                .map(|lv| {
+                    std::array::from_fn(|f| {
+                        marginals::quantiles_at(&pyramids[f].bands[lv], &probabilities)
+                    })
+                })
+                .collect(),
+        }
+    });
     let (models, notes): (Vec<LevelModel>, Vec<Option<String>>) = match kind {
         ModelKind::Car3d => (0..n_levels)
             .into_par_iter()
@@ -272,5 +291,13 @@ fn fit_subspace(
             (models, fits.into_iter().map(|f| f.1).collect())
         }
     };
-    (kl, marginals, models, notes.into_iter().flatten().collect())
+    let subspace = SubspaceModel {
+        representative: (0, 0),
+        kl,
+        marginals,
+        marginal_grid: grid,
+        levels: models,
+        band_marginals,
+    };
+    (subspace, notes.into_iter().flatten().collect())
 }

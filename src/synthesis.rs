@@ -14,7 +14,7 @@ use ndarray::{Array2, Array3, Axis};
 use rayon::prelude::*;
 
 use crate::btf::{Direction, Weighted};
-use crate::decompose::marginals::MarginalMap;
+use crate::decompose::marginals::{self, MarginalMap};
 use crate::decompose::pyramid::{Taps, apply_separable};
 use crate::decompose::{Border, Pyramid};
 use crate::geometry::integrate::{
@@ -191,8 +191,9 @@ impl MaterialModel {
         self.subspace_image(k, o, &NoiseBank::transient())
     }
 
-    /// Subspace image `k` with band noise from `noise`: every band synthesized in parallel,
-    /// then per KL factor (or colour band) the pyramid collapsed and the marginal matched.
+    /// Subspace image `k` with band noise from `noise`: every band synthesized in parallel
+    /// (and matched to its measured marginal when the model has band tables), then per KL
+    /// factor (or colour band) the pyramid collapsed and the marginal matched.
     fn subspace_image(
         &self,
         k: usize,
@@ -260,12 +261,23 @@ impl MaterialModel {
                 (0..3).map(|_| planes.drain(..n).collect()).collect()
             }
         };
+        let (band_probabilities, factor_probabilities) = (
+            marginals::band_probabilities(),
+            s.marginal_grid.probabilities(marginals::QUANTILES),
+        );
         let factors: Vec<(Array2<f64>, MarginalMap)> = bands
             .into_par_iter()
             .zip(&s.marginals)
-            .map(|(bands, target)| {
+            .enumerate()
+            .map(|(factor, (mut bands, target))| {
+                if let Some(tables) = &s.band_marginals {
+                    for (band, levels) in bands.iter_mut().zip(&tables.tables) {
+                        let table = &levels[factor];
+                        marginals::match_marginal(band, table, &band_probabilities);
+                    }
+                }
                 let plane = Pyramid { bands }.collapse_with(border);
-                let map = MarginalMap::new(&plane, target);
+                let map = MarginalMap::new(&plane, target, &factor_probabilities);
                 (plane, map)
             })
             .collect();

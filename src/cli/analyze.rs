@@ -46,8 +46,12 @@ pub struct Args {
     /// images are then not relit by bump mapping.
     #[arg(long)]
     no_range_map: bool,
+    /// Store a 33-quantile table per pyramid band (74 bytes each) and match every
+    /// synthesized band to it before the pyramid is collapsed.
+    #[arg(long)]
+    band_marginals: bool,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
-    /// clusters, levels, repairs, warnings.
+    /// clusters, levels, band_marginal_bytes, repairs, warnings.
     #[arg(long)]
     json: bool,
 }
@@ -82,6 +86,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         max_order: args.max_order,
         seed: args.seed,
         range_map: !args.no_range_map,
+        band_marginals: args.band_marginals,
+        ..AnalysisOptions::default()
     };
     let (model, report) = analyze(&btf, &options, &Bar::new(global))?;
     for w in &report.warnings {
@@ -101,6 +107,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             "clusters": model.subspaces.len(),
             "levels": model.levels(),
             "range_map": model.range_map.as_ref().map(|r| serde_json::json!({"rows": r.rows, "cols": r.cols, "step": r.step})),
+            "band_marginal_bytes": format::band_marginal_bytes(&model),
             "repairs": report.repairs,
             "warnings": report.warnings,
         }))?;

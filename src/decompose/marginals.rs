@@ -8,14 +8,74 @@ use ndarray::Array2;
 /// Quantiles stored per factor: the minimum, 15 inner ones, the maximum (17 values).
 pub const QUANTILES: usize = 17;
 
-/// Quantile table of a factor: values at probabilities `k / (QUANTILES - 1)`.
+/// Quantile table of a factor: values at the probabilities of a [`QuantileGrid`].
 pub type Quantiles = [f64; QUANTILES];
+
+/// Where a quantile table's probabilities lie.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum QuantileGrid {
+    /// Evenly spaced, `k / (n - 1)` (format version 1 factor tables).
+    Uniform,
+    /// The minimum, the maximum, and between them the standard normal CDF at `n - 2` points
+    /// evenly spaced over [-3, 3]. Measured factors and bands are heavy-tailed; an even grid
+    /// leaves the outer `1 / (n - 1)` of each tail to one linear piece, which spreads the few
+    /// extreme values (JPEG noise in the chroma of grey clay, edges in a band) over many pixels.
+    #[default]
+    NormalTails,
+}
+
+impl QuantileGrid {
+    /// The `n` probabilities (n >= 3), increasing from 0 to 1.
+    pub fn probabilities(self, n: usize) -> Vec<f64> {
+        match self {
+            QuantileGrid::Uniform => (0..n).map(|k| k as f64 / (n - 1) as f64).collect(),
+            QuantileGrid::NormalTails => {
+                let inner = n - 2;
+                std::iter::once(0.0)
+                    .chain(
+                        (0..inner).map(|k| normal_cdf(-3.0 + 6.0 * k as f64 / (inner - 1) as f64)),
+                    )
+                    .chain(std::iter::once(1.0))
+                    .collect()
+            }
+        }
+    }
+}
+
+/// Quantiles per pyramid band table (mrf_math.md 1(f')), on the [`QuantileGrid::NormalTails`]
+/// grid.
+pub const BAND_QUANTILES: usize = 33;
+
+/// Probabilities of the band tables.
+pub fn band_probabilities() -> Vec<f64> {
+    QuantileGrid::NormalTails.probabilities(BAND_QUANTILES)
+}
+
+/// The standard normal CDF (Abramowitz and Stegun 7.1.26 for erf, error below 1.5e-7).
+fn normal_cdf(z: f64) -> f64 {
+    let x = z.abs() / std::f64::consts::SQRT_2;
+    let t = 1.0 / (1.0 + 0.327_591_1 * x);
+    let poly = t
+        * (0.254_829_592
+            + t * (-0.284_496_736
+                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+    let erf = 1.0 - poly * (-x * x).exp();
+    0.5 * (1.0 + erf.copysign(z))
+}
 
 /// At most this many samples are sorted to estimate quantiles (a regular subsample).
 const MAX_SAMPLES: usize = 16_384;
 
-/// The quantiles of a plane's values (of a regular subsample of at most 16384 of them).
-pub fn quantiles(plane: &Array2<f64>) -> Quantiles {
+/// The quantiles of a plane's values (of a regular subsample of at most 16384 of them) at the
+/// factor probabilities of `grid`.
+pub fn quantiles(plane: &Array2<f64>, grid: QuantileGrid) -> Quantiles {
+    quantiles_at(plane, &grid.probabilities(QUANTILES))
+        .try_into()
+        .expect("QUANTILES values")
+}
+
+/// The quantiles of a plane's values at `probabilities` (non-decreasing, in [0, 1]).
+pub fn quantiles_at(plane: &Array2<f64>, probabilities: &[f64]) -> Vec<f64> {
     let stride = plane.len().div_ceil(MAX_SAMPLES).max(1);
     let mut sample: Vec<f64> = plane
         .iter()
@@ -24,21 +84,25 @@ pub fn quantiles(plane: &Array2<f64>) -> Quantiles {
         .filter(|v| v.is_finite())
         .collect();
     if sample.is_empty() {
-        return [0.0; QUANTILES];
+        return vec![0.0; probabilities.len()];
     }
     sample.sort_by(f64::total_cmp);
     let last = (sample.len() - 1) as f64;
-    std::array::from_fn(|k| {
-        let pos = last * k as f64 / (QUANTILES - 1) as f64;
-        let (i, f) = (pos.floor() as usize, pos - pos.floor());
-        let next = (i + 1).min(sample.len() - 1);
-        sample[i] * (1.0 - f) + sample[next] * f
-    })
+    probabilities
+        .iter()
+        .map(|&p| {
+            let pos = last * p.clamp(0.0, 1.0);
+            let (i, f) = (pos.floor() as usize, pos - pos.floor());
+            let next = (i + 1).min(sample.len() - 1);
+            sample[i] * (1.0 - f) + sample[next] * f
+        })
+        .collect()
 }
 
-/// Maps `plane` so that its quantiles become `target` (see [`MarginalMap`]).
-pub fn match_marginal(plane: &mut Array2<f64>, target: &Quantiles) {
-    let map = MarginalMap::new(plane, target);
+/// Maps `plane` so that its quantiles at `probabilities` become `target` (see
+/// [`MarginalMap`]).
+pub fn match_marginal(plane: &mut Array2<f64>, target: &[f64], probabilities: &[f64]) {
+    let map = MarginalMap::new(plane, target, probabilities);
     plane.par_mapv_inplace(|v| map.apply(v));
 }
 
@@ -48,21 +112,22 @@ pub fn match_marginal(plane: &mut Array2<f64>, target: &Quantiles) {
 /// one multiply-add per value instead of a search.
 #[derive(Debug, Clone)]
 pub struct MarginalMap {
-    source: Quantiles,
-    target: Quantiles,
+    source: Vec<f64>,
+    target: Vec<f64>,
     /// (lowest source value, grid steps per unit, map at the grid nodes) when tabulated.
     table: Option<(f64, f64, Vec<f64>)>,
 }
 
 impl MarginalMap {
-    /// The map for `plane`'s values onto `target`.
-    pub fn new(plane: &Array2<f64>, target: &Quantiles) -> Self {
+    /// The map for `plane`'s values onto `target`, the quantiles at `probabilities`.
+    pub fn new(plane: &Array2<f64>, target: &[f64], probabilities: &[f64]) -> Self {
+        debug_assert_eq!(target.len(), probabilities.len());
         let mut map = Self {
-            source: quantiles(plane),
-            target: *target,
+            source: quantiles_at(plane, probabilities),
+            target: target.to_vec(),
             table: None,
         };
-        let (lo, hi) = (map.source[0], map.source[QUANTILES - 1]);
+        let (lo, hi) = (map.source[0], map.source[map.source.len() - 1]);
         if hi.partial_cmp(&lo) == Some(std::cmp::Ordering::Greater) && plane.len() >= 4 * LUT {
             let step = (hi - lo) / LUT as f64;
             let nodes = (0..=LUT).map(|i| map.exact(lo + step * i as f64)).collect();
@@ -87,11 +152,12 @@ impl MarginalMap {
 
     fn exact(&self, v: f64) -> f64 {
         let (source, target) = (&self.source, &self.target);
+        let n = source.len();
         let k = source.partition_point(|&q| q < v);
         if k == 0 {
             target[0]
-        } else if k >= QUANTILES {
-            target[QUANTILES - 1]
+        } else if k >= n {
+            target[n - 1]
         } else {
             let (a, b) = (source[k - 1], source[k]);
             let t = if b > a { (v - a) / (b - a) } else { 1.0 };
@@ -101,7 +167,7 @@ impl MarginalMap {
 }
 
 /// Entries of the tabulated marginal map (the error against the exact map is below
-/// (range / LUT)^2 times its curvature, which is zero inside each of the 16 linear pieces).
+/// (range / LUT)^2 times its curvature, which is zero inside each linear piece).
 const LUT: usize = 4096;
 
 #[cfg(test)]
@@ -115,23 +181,61 @@ mod tests {
                 (64, 64),
                 |(y, x)| if (x / 8 + y / 8) % 2 == 0 { -1.0 } else { 1.0 },
             );
-        let target = quantiles(&target_plane);
+        let uniform = QuantileGrid::Uniform;
+        let target = quantiles(&target_plane, uniform);
         let mut plane =
             Array2::from_shape_fn((64, 64), |(y, x)| ((x * 31 + y * 17) % 97) as f64 / 97.0);
-        match_marginal(&mut plane, &target);
+        match_marginal(&mut plane, &target, &uniform.probabilities(QUANTILES));
         let high = plane.iter().filter(|&&v| v > 0.5).count() as f64 / plane.len() as f64;
         assert!((high - 0.5).abs() < 0.05, "{high}");
         assert!(plane.iter().all(|&v| (-1.0..=1.0).contains(&v)));
         // Matching to one's own quantiles changes little.
         let mut same = target_plane.clone();
-        match_marginal(&mut same, &quantiles(&target_plane));
-        assert_eq!(quantiles(&same), target);
+        let probs = uniform.probabilities(QUANTILES);
+        match_marginal(&mut same, &quantiles(&target_plane, uniform), &probs);
+        assert_eq!(quantiles(&same, uniform), target);
     }
 
     #[test]
     fn constant_planes_stay_finite() {
         let mut flat = Array2::from_elem((5, 5), 2.0);
-        match_marginal(&mut flat, &[3.0; QUANTILES]);
+        let probs = QuantileGrid::NormalTails.probabilities(QUANTILES);
+        match_marginal(&mut flat, &[3.0; QUANTILES], &probs);
         assert!(flat.iter().all(|&v| v == 3.0));
+    }
+
+    #[test]
+    fn band_probabilities_resolve_the_tails() {
+        let p = band_probabilities();
+        assert_eq!(p.len(), BAND_QUANTILES);
+        assert!(p.windows(2).all(|w| w[1] > w[0]));
+        assert!((p[16] - 0.5).abs() < 1e-7);
+        // Phi(-3) and Phi(-1) to the table's accuracy.
+        assert!((p[1] - 0.001_349_9).abs() < 1e-6, "{}", p[1]);
+        assert!((normal_cdf(-1.0) - 0.158_655_3).abs() < 1e-6);
+        assert!((normal_cdf(1.0) + normal_cdf(-1.0) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_sparse_heavy_tailed_band_is_restored_with_its_tail() {
+        // The target: mostly near zero, 1 % large values (edges). A Gaussian matched to its
+        // table keeps about 1 % beyond half the maximum, not the 3 % an even 33-quantile
+        // table spreads linearly towards it.
+        let target_plane = Array2::from_shape_fn((128, 128), |(y, x)| {
+            let i = y * 128 + x;
+            if i % 100 == 0 {
+                10.0
+            } else {
+                ((i * 37 % 101) as f64 - 50.0) / 500.0
+            }
+        });
+        let probs = band_probabilities();
+        let target = quantiles_at(&target_plane, &probs);
+        let mut plane = Array2::from_shape_fn((128, 128), |(y, x)| {
+            ((y * 128 + x) as f64 * 0.618_034).fract() - 0.5
+        });
+        match_marginal(&mut plane, &target, &probs);
+        let big = plane.iter().filter(|&&v| v > 5.0).count() as f64 / plane.len() as f64;
+        assert!((0.005..0.015).contains(&big), "{big}");
     }
 }

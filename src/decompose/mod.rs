@@ -9,5 +9,5 @@ pub mod pyramid;
 pub mod stationarity;
 
 pub use cluster::{ClusterOptions, SubspaceClustering};
-pub use kl::KlBasis;
+pub use kl::{ColourSpace, KlBasis};
 pub use pyramid::{Border, Pyramid};

@@ -3,18 +3,21 @@
 
 use std::path::Path;
 
-use super::material::{BandModel, LevelModel, MaterialModel, ModelKind, RangeMap, SubspaceModel};
+use super::material::{
+    BandMarginals, BandModel, LevelModel, MaterialModel, ModelKind, RangeMap, SubspaceModel,
+};
 use super::{ModelError, Result};
 use crate::btf::{Direction, DirectionSet, io};
-use crate::decompose::KlBasis;
-use crate::decompose::marginals::QUANTILES;
+use crate::decompose::marginals::{BAND_QUANTILES, QUANTILES, QuantileGrid};
+use crate::decompose::{ColourSpace, KlBasis};
 use crate::mrf::neighbourhood::{MAX_ORDER, causal};
 use crate::mrf::{Car2dModel, Car3dModel, GmrfModel, car3d::MAX_ORDER_3D};
 
 /// The four bytes every model file starts with.
 pub const MAGIC: [u8; 4] = *b"BTFM";
-/// The format version this library writes and reads.
-pub const VERSION: u16 = 1;
+/// The format version this library writes. Version 1 files (no colour space, no band
+/// marginals: linear RGB KL) are still read.
+pub const VERSION: u16 = 2;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -186,6 +189,7 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
             }
         }
     }
+    write_colour(&mut w, model);
     let payload = w.0;
     let mut out = Vec::with_capacity(payload.len() + 16);
     out.extend_from_slice(&MAGIC);
@@ -195,6 +199,68 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
     out.extend_from_slice(&payload);
     out.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
     out
+}
+
+/// The version 2 tail: the colour space, then the band quantile tables if any.
+fn write_colour(w: &mut Writer, model: &MaterialModel) {
+    let space = model
+        .subspaces
+        .first()
+        .map_or(ColourSpace::Lab, |s| s.kl.space);
+    w.u8(match space {
+        ColourSpace::LinearRgb => 0,
+        ColourSpace::Lab => 1,
+    });
+    let grid = model
+        .subspaces
+        .first()
+        .map_or(QuantileGrid::NormalTails, |s| s.marginal_grid);
+    w.u8(match grid {
+        QuantileGrid::Uniform => 0,
+        QuantileGrid::NormalTails => 1,
+    });
+    let with_bands = model.subspaces.iter().all(|s| s.band_marginals.is_some());
+    w.u8(if with_bands { BAND_QUANTILES as u8 } else { 0 });
+    for s in model.subspaces.iter().filter(|_| with_bands) {
+        for table in s
+            .band_marginals
+            .iter()
+            .flat_map(|b| b.tables.iter().flatten())
+        {
+            write_quantised(w, table);
+        }
+    }
+}
+
+/// Bytes the band quantile tables take in the file (0 without them).
+pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
+    let tables: usize = model
+        .subspaces
+        .iter()
+        .filter_map(|s| s.band_marginals.as_ref())
+        .map(|b| 3 * b.tables.len())
+        .sum();
+    tables * (8 + 2 * BAND_QUANTILES)
+}
+
+/// Non-decreasing values as `f32` low, `f32` quantum and one `u16` code each (rounding is
+/// monotone, so the decoded table stays non-decreasing).
+fn write_quantised(w: &mut Writer, values: &[f64]) {
+    let (lo, hi) = values
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    let (lo, hi) = (lo as f32, hi as f32);
+    let quantum = if hi > lo { (hi - lo) / 65535.0 } else { 0.0 };
+    w.f32(f64::from(lo));
+    w.f32(f64::from(quantum));
+    for &v in values {
+        let code = if quantum > 0.0 {
+            ((v as f32 - lo) / quantum).round().clamp(0.0, 65535.0)
+        } else {
+            0.0
+        };
+        w.u16(code as u16);
+    }
 }
 
 fn write_band(w: &mut Writer, order: u8, mean: f64, sigma2: f64, gamma: &[f64]) {
@@ -218,7 +284,8 @@ pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<MaterialModel> {
 }
 
 fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
-    let payload = crate::btf::io::envelope::open(bytes, MAGIC, ".btfm", VERSION, MAX_PAYLOAD)?;
+    let (version, payload) =
+        crate::btf::io::envelope::open_versions(bytes, MAGIC, ".btfm", 1..=VERSION, MAX_PAYLOAD)?;
     let mut r = Reader {
         bytes: payload,
         pos: 0,
@@ -292,6 +359,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         let mean: [f64; 3] = r.f32s(3)?.try_into().expect("3");
         let b = r.f32s(9)?;
         let kl = KlBasis {
+            space: ColourSpace::LinearRgb,
             mean,
             basis: std::array::from_fn(|i| std::array::from_fn(|j| b[3 * i + j])),
             variances: [0.0; 3],
@@ -351,7 +419,9 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             representative,
             kl,
             marginals,
+            marginal_grid: QuantileGrid::Uniform,
             levels: level_models,
+            band_marginals: None,
         });
     }
     let range_map = match r.u8()? {
@@ -376,6 +446,9 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         }
         f => return Err(format!("unknown range map flag {f}")),
     };
+    if version >= 2 {
+        read_colour(&mut r, &mut subspaces, usize::from(levels))?;
+    }
     if r.pos != payload.len() {
         return Err(format!(
             "{} unexplained bytes at the end of the payload",
@@ -392,6 +465,55 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         subspaces,
         range_map,
     })
+}
+
+/// Reads the version 2 tail (see [`write_colour`]) into the subspace models.
+fn read_colour(r: &mut Reader, subspaces: &mut [SubspaceModel], levels: usize) -> Parse<()> {
+    let space = match r.u8()? {
+        0 => ColourSpace::LinearRgb,
+        1 => ColourSpace::Lab,
+        c => return Err(format!("unknown colour space {c}")),
+    };
+    let grid = match r.u8()? {
+        0 => QuantileGrid::Uniform,
+        1 => QuantileGrid::NormalTails,
+        g => return Err(format!("unknown factor quantile grid {g}")),
+    };
+    let count = usize::from(r.u8()?);
+    if count != 0 && count != BAND_QUANTILES {
+        return Err(format!(
+            "{count} band quantiles (0 or {BAND_QUANTILES} accepted)"
+        ));
+    }
+    if count > 0 {
+        r.ensure(subspaces.len() * levels * 3, 8 + 2 * count)?;
+    }
+    for s in subspaces.iter_mut() {
+        s.kl.space = space;
+        s.marginal_grid = grid;
+        if count == 0 {
+            continue;
+        }
+        let mut tables = Vec::with_capacity(levels);
+        for _ in 0..levels {
+            let mut level: [Vec<f64>; 3] = Default::default();
+            for table in &mut level {
+                let (lo, quantum) = (r.f32()?, r.f32()?);
+                if quantum < 0.0 {
+                    return Err(format!("negative band quantile step {quantum}"));
+                }
+                *table = (0..count)
+                    .map(|_| Ok(lo + quantum * f64::from(r.u16()?)))
+                    .collect::<Parse<Vec<f64>>>()?;
+                if table.windows(2).any(|w| w[1] < w[0]) {
+                    return Err("band quantile table is not increasing".into());
+                }
+            }
+            tables.push(level);
+        }
+        s.band_marginals = Some(BandMarginals { tables });
+    }
+    Ok(())
 }
 
 /// Writes a model file atomically.

@@ -2,7 +2,9 @@
 
 use crate::btf::DirectionSet;
 use crate::decompose::KlBasis;
-use crate::decompose::marginals::Quantiles;
+#[cfg(doc)]
+use crate::decompose::marginals::BAND_QUANTILES;
+use crate::decompose::marginals::{QuantileGrid, Quantiles};
 use crate::mrf::{Car2dModel, Car3dModel, GmrfModel};
 
 /// Which MRF models the bands.
@@ -76,11 +78,26 @@ pub struct SubspaceModel {
     pub representative: (u16, u16),
     /// The colour basis (identity for the 3D CAR, which needs none).
     pub kl: KlBasis,
-    /// Quantiles of the three factor planes (KL factors, or RGB for the 3D CAR) of the
-    /// measured image, for marginal matching after synthesis.
+    /// Quantiles of the three factor planes (KL factors, or colour channels for the 3D CAR)
+    /// of the measured image, for marginal matching after synthesis.
     pub marginals: [Quantiles; 3],
+    /// The probabilities of `marginals` (uniform in version 1 files).
+    pub marginal_grid: QuantileGrid,
     /// Level models, finest first.
     pub levels: Vec<LevelModel>,
+    /// Quantile tables of the measured pyramid bands, if the model matches band marginals.
+    pub band_marginals: Option<BandMarginals>,
+}
+
+/// The measured marginal distribution of every pyramid band of a subspace image (format
+/// version 2; mrf_math.md 1(f')): each synthesized band is mapped onto it before the pyramid
+/// is collapsed, so sparse, heavy-tailed bands (edges, pores) are not left Gaussian.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BandMarginals {
+    /// `tables[level][factor]`: [`BAND_QUANTILES`] values at
+    /// [`band_probabilities`](crate::decompose::marginals::band_probabilities), finest level
+    /// first.
+    pub tables: Vec<[Vec<f64>; 3]>,
 }
 
 /// A range map (height field) tile for bump or displacement mapping, estimated by photometric

@@ -5,4 +5,6 @@ pub mod format;
 mod material;
 
 pub use error::{ModelError, Result};
-pub use material::{BandModel, LevelModel, MaterialModel, ModelKind, RangeMap, SubspaceModel};
+pub use material::{
+    BandMarginals, BandModel, LevelModel, MaterialModel, ModelKind, RangeMap, SubspaceModel,
+};

@@ -11,6 +11,17 @@ pub(crate) fn open<'a>(
     version: u16,
     max_payload: u32,
 ) -> Result<&'a [u8], String> {
+    open_versions(bytes, magic, ext, version..=version, max_payload).map(|(_, p)| p)
+}
+
+/// [`open`] for a reader of several format versions: the version found and the payload.
+pub(crate) fn open_versions<'a>(
+    bytes: &'a [u8],
+    magic: [u8; 4],
+    ext: &str,
+    versions: std::ops::RangeInclusive<u16>,
+    max_payload: u32,
+) -> Result<(u16, &'a [u8]), String> {
     if bytes.len() < 4 {
         return Err(format!("not a {ext} model (too short)"));
     }
@@ -23,10 +34,13 @@ pub(crate) fn open<'a>(
             .ok_or_else(|| format!("truncated at byte {at} (wanted {n} more)"))
     };
     let found = u16::from_le_bytes(field(4, 2)?.try_into().expect("2 bytes"));
-    if found != version {
-        return Err(format!(
-            "format version {found}; this build reads version {version}"
-        ));
+    if !versions.contains(&found) {
+        let known = if versions.start() == versions.end() {
+            format!("version {}", versions.start())
+        } else {
+            format!("versions {}-{}", versions.start(), versions.end())
+        };
+        return Err(format!("format version {found}; this build reads {known}"));
     }
     // No flag is defined yet: a file with any set was written by a later version whose
     // meaning this build cannot know, so it is refused rather than misread.
@@ -54,5 +68,5 @@ pub(crate) fn open<'a>(
             bytes.len() - end
         ));
     }
-    Ok(payload)
+    Ok((found, payload))
 }
