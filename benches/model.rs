@@ -1,5 +1,6 @@
 //! Speed of the MRF model: analysis of a generated 81 x 81 BTF at 128 x 128, synthesis of one
-//! 1024 x 1024 BTF image and of all subspace images, and the band synthesizers alone.
+//! 1024 x 1024 BTF image (plain and tileable) and of all subspace images, and the band
+//! synthesizers alone.
 //!
 //! Run: `cargo bench --bench model` (medians in target/criterion/). Targets from the MRF issue:
 //! analysis under 10 s, one 1024^2 image in 25 ms, all 20 subspaces at 1024^2 under 1 s.
@@ -63,6 +64,10 @@ fn bench_synthesis(c: &mut Criterion) {
         seed: 1,
         tileable: false,
     };
+    let tiled = SynthesisOptions {
+        tileable: true,
+        ..o
+    };
     for kind in ModelKind::ALL {
         let model = fitted(kind);
         // A measured pair: exactly one subspace image is needed.
@@ -72,6 +77,16 @@ fn bench_synthesis(c: &mut Criterion) {
                 black_box(
                     model
                         .synthesize_image(&view, &light, &o)
+                        .expect("synthesis"),
+                )
+            })
+        });
+        // The same image made tileable (the CAR models solved on the torus by the DFT).
+        group.bench_function(BenchmarkId::new("one_image_tileable", kind.name()), |b| {
+            b.iter(|| {
+                black_box(
+                    model
+                        .synthesize_image(&view, &light, &tiled)
                         .expect("synthesis"),
                 )
             })

@@ -37,7 +37,7 @@ pub struct SynthesisOptions {
     /// Seed of the driving noise: same seed, same bytes.
     pub seed: u64,
     /// Make the output tile seamlessly (every model is then sampled exactly on the torus: by
-    /// FFT for the GMRF, by Gauss-Seidel sweeps for the CAR models).
+    /// FFT for the GMRF, by the DFT solution of the circulant recursion for the CAR models).
     /// Needs sizes divisible by `2^(levels - 1)`.
     pub tileable: bool,
 }

@@ -2,38 +2,19 @@
 //! mrf_math.md sec. 2): `Y_r = gamma X_r + e_r`, `X_r` the causal neighbours, `e_r` white
 //! Gaussian noise. Parameters and noise variance have analytic Bayesian estimates; the
 //! neighbourhood is chosen by the Bayesian decision rule over the causal hierarchy; synthesis is
-//! the causal recursion with a burn-in margin, or the exact toroidal field (which tiles) by
-//! Gauss-Seidel sweeps.
+//! the causal recursion with a burn-in margin, or the exact toroidal field (which tiles) by the
+//! DFT (see [`torus`]).
 
 use super::neighbourhood::{MAX_ORDER, causal, reach};
 use super::noise::{require, standard_normal};
 use super::{Car2dFit, choose_stable, is_flat};
+use super::{spectrum, torus};
 use nalgebra::{DMatrix, DVector};
 use ndarray::{Array2, ArrayView2, s};
 
 /// Burn-in margin of the causal synthesis, pixels (fixed, so that every band of every
 /// subspace sees the same driving noise at the same position).
 pub const MARGIN: usize = 32;
-
-/// The most raster passes of a toroidal (tileable) synthesis.
-pub const TORUS_PASSES: usize = 32;
-
-/// A toroidal synthesis stops when a pass changes no value by more than this many noise
-/// standard deviations.
-const TORUS_TOLERANCE: f64 = 1e-6;
-
-/// Solves a causal model on a torus by Gauss-Seidel sweeps: `pass` runs the recursion once in
-/// raster order with the same noise every time (wrapped neighbours see the previous sweep's
-/// values) and returns its largest change in noise standard deviations. The fixed point is the
-/// exact toroidal field `Y = (I - G)^-1 e`; a stable model's sweeps converge geometrically,
-/// and after [`TORUS_PASSES`] a slow (near unit root) one stops where it is.
-pub(crate) fn solve_on_torus(mut pass: impl FnMut() -> f64) {
-    for _ in 0..TORUS_PASSES {
-        if pass() <= TORUS_TOLERANCE {
-            break;
-        }
-    }
-}
 
 /// A fitted 2D CAR model of one band.
 #[derive(Debug, Clone, PartialEq)]
@@ -220,12 +201,25 @@ impl Car2dModel {
         }
     }
 
-    /// Stable in the practical sense synthesis needs: a 128 x 128 test sample (after the
-    /// burn-in margin) is finite, does not grow from its top half to its bottom half, and its
-    /// variance stays within 4x the data's. The last condition also rejects near-unit-root
-    /// estimates, which are formally stable but fill an enlargement with huge low-frequency
-    /// blotches.
+    /// Stable in the sense synthesis at any size needs (mrf_math.md 2.5): the recursion decays
+    /// along the rows and down them at every column frequency (exact half-plane conditions,
+    /// see [`spectrum`]; a probe only 128 wide misses a slow growth along the rows that a wide
+    /// synthesis turns into a blown-up right edge), the stationary variance over the whole
+    /// frequency plane (what a tileable field has) stays within 4x the data's, and a 128 x 128
+    /// test sample after the burn-in margin is finite, does not grow from its top half to its
+    /// bottom half and has a variance within 4x the data's. The variance bounds also reject
+    /// near-unit-root estimates, which are formally stable but fill an enlargement with huge
+    /// low-frequency blotches.
     pub fn is_stable(&self, data_var: f64) -> bool {
+        let offsets = causal(self.order as usize);
+        if !spectrum::causally_stable(offsets, &self.gamma) {
+            return false;
+        }
+        let stationary =
+            spectrum::stationary_variance(offsets, &self.gamma, self.sigma2, spectrum::GRID);
+        if stationary.is_nan() || stationary > 4.0 * data_var {
+            return false;
+        }
         let probe = Self {
             mean: 0.0,
             ..self.clone()
@@ -236,7 +230,7 @@ impl Car2dModel {
 
     /// A `rows` x `cols` sample. `seed` fixes the driving noise; with the same seed and size,
     /// every model sees the same noise at the same pixel (coherent subspaces). `tileable` solves
-    /// the model on a torus (see [`TORUS_PASSES`]), so the result wraps seamlessly.
+    /// the model exactly on the torus (see [`torus`]), so the result wraps seamlessly.
     pub fn synthesize(&self, rows: usize, cols: usize, seed: u64, tileable: bool) -> Array2<f64> {
         let noise = standard_normal(seed, Self::noise_len(rows, cols, tileable));
         self.synthesize_from(rows, cols, &noise, tileable)
@@ -274,26 +268,13 @@ impl Car2dModel {
             return Array2::zeros((rows, cols));
         }
         if tileable {
-            let mut y = vec![0.0f64; rows * cols];
-            solve_on_torus(|| {
-                let mut change = 0.0f64;
-                for r in 0..rows {
-                    for c in 0..cols {
-                        let mut acc = sigma * f64::from(noise[r * cols + c]);
-                        for (g, &(s1, s2)) in self.gamma.iter().zip(offsets) {
-                            let rr = (r as isize - s1).rem_euclid(rows as isize) as usize;
-                            let cc = (c as isize - s2).rem_euclid(cols as isize) as usize;
-                            acc += g * y[rr * cols + cc];
-                        }
-                        change = change.max((acc - y[r * cols + c]).abs());
-                        y[r * cols + c] = acc;
-                    }
-                }
-                change / sigma.max(f64::MIN_POSITIVE)
-            });
-            return Array2::from_shape_vec((rows, cols), y)
-                .expect("rows x cols field")
-                .mapv(|v| v + self.mean);
+            return torus::car2d(
+                (rows, cols),
+                noise,
+                sigma,
+                (offsets, &self.gamma),
+                self.mean,
+            );
         }
         // A zero border of 3 (the widest reach) around a margin-padded field keeps every
         // neighbour index in range; the bottom-middle rows x cols are returned. Each row is
@@ -526,7 +507,7 @@ mod tests {
         // A ramp has singular statistics and a near-unit-root fit; the result must be stable.
         let ramp = Array2::from_shape_fn((40, 40), |(i, j)| i as f64 + 2.0 * j as f64);
         let fit = Car2dModel::fit(&ramp, 6);
-        assert!(fit.model.is_stable(1.0));
+        assert!(fit.model.is_stable(ramp.var(0.0)));
         assert!(
             fit.model
                 .synthesize(64, 64, 1, false)

@@ -4,9 +4,10 @@
 //! jointly, so no KL decorrelation is needed and spatial cross-channel correlation is kept.
 
 use super::Car2dModel;
-use super::car2d::{MARGIN, bounded_sample, solve_on_torus};
+use super::car2d::{MARGIN, bounded_sample};
 use super::neighbourhood::{causal, reach};
 use super::noise::{require, standard_normal};
+use super::torus;
 use super::{Car3dFit, choose_stable, is_flat};
 use nalgebra::{DMatrix, Matrix3};
 use ndarray::Array3;
@@ -302,32 +303,18 @@ impl Car3dModel {
             return Array3::zeros((3, rows, cols));
         }
         if tileable {
-            // Solved on the torus as for the 2D CAR: the same innovations every sweep.
-            let innovations: Vec<[f64; 3]> = (0..rows * cols).map(|_| innovation()).collect();
-            let scale = l.norm().max(f64::MIN_POSITIVE);
-            let mut y = vec![[0.0f64; 3]; rows * cols];
-            solve_on_torus(|| {
-                let mut change = 0.0f64;
-                for r in 0..rows {
-                    for c in 0..cols {
-                        let mut acc = innovations[r * cols + c];
-                        for (ak, &(s1, s2)) in a.iter().zip(offsets) {
-                            let rr = (r as isize - s1).rem_euclid(rows as isize) as usize;
-                            let cc = (c as isize - s2).rem_euclid(cols as isize) as usize;
-                            apply(&mut acc, ak, y[rr * cols + cc]);
-                        }
-                        let old = y[r * cols + c];
-                        for p in 0..3 {
-                            change = change.max((acc[p] - old[p]).abs());
-                        }
-                        y[r * cols + c] = acc;
-                    }
+            let mut e: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(rows * cols));
+            for _ in 0..rows * cols {
+                for (plane, v) in e.iter_mut().zip(innovation()) {
+                    plane.push(v as f32);
                 }
-                change / scale
-            });
-            return Array3::from_shape_fn((3, rows, cols), |(ch, r, c)| {
-                y[r * cols + c][ch] + self.mean[ch]
-            });
+            }
+            let blocks: Vec<[f64; 9]> = (0..offsets.len())
+                .map(|k| std::array::from_fn(|q| self.a[9 * k + q]))
+                .collect();
+            let [y0, y1, y2] = torus::car3d((rows, cols), &e, (offsets, &blocks), self.mean);
+            return ndarray::stack(ndarray::Axis(0), &[y0.view(), y1.view(), y2.view()])
+                .expect("equal channel shapes");
         }
         let pad = 3;
         let width = pad + MARGIN + cols + MARGIN + pad;

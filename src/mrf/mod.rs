@@ -6,6 +6,8 @@ pub mod car3d;
 pub mod gmrf;
 pub mod neighbourhood;
 pub mod noise;
+mod spectrum;
+mod torus;
 
 pub use car2d::Car2dModel;
 pub use car3d::Car3dModel;
