@@ -39,7 +39,7 @@ fn frames(c: &mut Criterion) {
         )
         .unwrap();
     let tables = MaterialTables::new(&model, &cache, None).unwrap();
-    let heights = model.range_heights(n, n, true);
+    let heights = model.range_heights(n, n, 1);
     let material = GpuMaterial::new(
         &renderer.ctx,
         &renderer.pipelines,

@@ -10,7 +10,7 @@ use crate::decompose::marginals::{self, QuantileGrid, Quantiles};
 use crate::decompose::pyramid::auto_levels;
 use crate::decompose::stationarity::{NON_STATIONARY_SHARE, block_mean_share};
 use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceClustering};
-use crate::geometry;
+use crate::geometry::{self, relight};
 use crate::model::{
     BandMarginals, BandModel, LevelModel, MaterialModel, ModelError, ModelKind, RangeMap, Result,
     SubspaceModel,
@@ -120,13 +120,35 @@ pub fn analyze(
         },
         progress,
     )?;
+    let mut report = AnalysisReport::default();
+    let range_map = if options.range_map {
+        match estimate_range_map(btf, progress) {
+            Ok(map) => Some(map),
+            Err(e) => {
+                report.repairs.push(format!("no range map: {e}"));
+                None
+            }
+        }
+    } else {
+        None
+    };
+    // The frontal view's images are registered with the range map: their relief shading is
+    // divided out before fitting, since synthesis applies it again (geometry::relight).
+    let frontal = geometry::frontal_view(btf);
+    let registered = range_map.as_ref().map(|m| m.registered(h, w));
     progress.start("fitting models", clustering.clusters() as u64);
     let fitted: Vec<(SubspaceModel, Vec<String>)> = clustering
         .representatives
         .par_iter()
         .enumerate()
         .map(|(k, &(v, l))| {
-            let image = btf.image(v, l)?;
+            let mut image = btf.image(v, l)?;
+            if let (Some(map), Some(heights), Some(light)) =
+                (&range_map, &registered, btf.lights().get(l))
+                && v == frontal
+            {
+                relight::remove_shading(&mut image, heights, light.vector(), map.strength_of(l));
+            }
             let (subspace, notes) = fit_subspace(&image, options, levels);
             progress.advance(1);
             let notes = notes
@@ -143,21 +165,9 @@ pub fn analyze(
         })
         .collect::<Result<_>>()?;
     progress.finish();
-    let mut report = AnalysisReport::default();
     report
         .warnings
         .extend(stationarity_warning(btf, &clustering.representatives)?);
-    let range_map = if options.range_map {
-        match estimate_range_map(btf, progress) {
-            Ok(map) => Some(map),
-            Err(e) => {
-                report.repairs.push(format!("no range map: {e}"));
-                None
-            }
-        }
-    } else {
-        None
-    };
     let mut subspaces = Vec::with_capacity(fitted.len());
     for (s, notes) in fitted {
         subspaces.push(s);
@@ -198,23 +208,38 @@ fn stationarity_warning(btf: &Btf, representatives: &[(usize, usize)]) -> Result
     }))
 }
 
-/// Photometric stereo on the frontal view, Frankot-Chellappa integration, and averaging down to
-/// at most [`RANGE_MAP_MAX_SIDE`] samples a side.
+/// Photometric stereo on the frontal view, Frankot-Chellappa integration, averaging down to at
+/// most [`RANGE_MAP_MAX_SIDE`] samples a side, and the bump strength of every light fitted to
+/// the frontal images (geometry::relight).
 fn estimate_range_map(
     btf: &Btf,
     progress: &dyn Progress,
 ) -> std::result::Result<RangeMap, crate::btf::BtfError> {
-    let normals = geometry::estimate_normals(btf, geometry::frontal_view(btf), progress)?;
+    let view = geometry::frontal_view(btf);
+    let normals = geometry::estimate_normals(btf, view, progress)?;
     let heights = geometry::frankot_chellappa(&normals.normals);
     let (h, w) = heights.dim();
     let step = h.max(w).div_ceil(RANGE_MAP_MAX_SIDE).max(1);
     let tile = geometry::downsample(&heights, step);
-    Ok(RangeMap {
+    let mut map = RangeMap {
         rows: tile.nrows(),
         cols: tile.ncols(),
         heights: tile.iter().map(|&v| v as f32).collect(),
         step,
-    })
+        strength: Vec::new(),
+    };
+    let registered = map.registered(h, w);
+    map.strength = btf
+        .lights()
+        .as_slice()
+        .par_iter()
+        .enumerate()
+        .map(|(l, d)| {
+            let lum = relight::luminance(&btf.image(view, l)?);
+            Ok(relight::fit_strength(&lum, &registered, d.vector()) as f32)
+        })
+        .collect::<std::result::Result<_, crate::btf::BtfError>>()?;
+    Ok(map)
 }
 
 /// Fits one subspace image: its colour basis (the identity for the 3D CAR, which models the

@@ -15,11 +15,10 @@ use rayon::prelude::*;
 
 use crate::btf::{Direction, Weighted};
 use crate::decompose::marginals::{self, MarginalMap};
-use crate::decompose::pyramid::{Taps, apply_separable};
 use crate::decompose::{Border, Pyramid};
-use crate::geometry::integrate::{
-    Border as NormalBorder, normals_of, normals_of_periodic, shading,
-};
+use crate::geometry::integrate::{Border as NormalBorder, normals_of_periodic};
+use crate::geometry::relight::shading_factor;
+use crate::geometry::{quilt, resample_periodic};
 use crate::model::{BandModel, LevelModel, MaterialModel, ModelError, Result};
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{Car2dModel, Car3dModel, GmrfModel};
@@ -112,16 +111,13 @@ impl SynthesisCache {
         self.subspaces.get(k).and_then(|s| s.get())
     }
 
-    /// Unit normals of the range map at the cache's size, shape (3, rows, cols); `None` without
-    /// a range map.
+    /// Unit normals of the range map at the cache's size (which is periodic, see
+    /// [`MaterialModel::range_heights`]), shape (3, rows, cols); `None` without a range map.
     pub fn normals(&self) -> Option<&Array3<f64>> {
         self.normals
             .get_or_init(|| {
                 let heights = self.heights.as_ref()?;
-                Some(match self.border() {
-                    NormalBorder::Wrap => normals_of_periodic(heights),
-                    NormalBorder::Clamp => normals_of(heights),
-                })
+                Some(normals_of_periodic(heights))
             })
             .as_ref()
     }
@@ -130,15 +126,6 @@ impl SynthesisCache {
     /// without a range map.
     pub fn heights(&self) -> Option<&Array2<f64>> {
         self.heights.as_ref()
-    }
-
-    /// How the range map's differences treat its borders: wrapped when the synthesis tiles.
-    fn border(&self) -> NormalBorder {
-        if self.options.tileable {
-            NormalBorder::Wrap
-        } else {
-            NormalBorder::Clamp
-        }
     }
 }
 
@@ -362,7 +349,7 @@ impl MaterialModel {
     /// An invalid size.
     pub fn synthesis_cache(&self, o: &SynthesisOptions) -> Result<SynthesisCache> {
         check(self, o)?;
-        let heights = self.range_heights(o.rows, o.cols, o.tileable);
+        let heights = self.range_heights(o.rows, o.cols, o.seed);
         Ok(self.empty_cache(o, heights, NoiseBank::kept()))
     }
 
@@ -403,7 +390,8 @@ impl MaterialModel {
         }
         let mut out = out.unwrap_or_else(|| Array3::zeros((3, o.rows, o.cols)));
         if let Some(heights) = &cache.heights {
-            bump_relight(&mut out, heights, cache.border(), light);
+            let strength = self.bump_strength(light)?;
+            bump_relight(&mut out, heights, NormalBorder::Wrap, light, strength);
         }
         Ok(out)
     }
@@ -444,7 +432,7 @@ impl MaterialModel {
         // The first image draws every band's noise (while the range map is resampled
         // beside it); the others reuse it, in parallel.
         let (heights, cache) = rayon::join(
-            || self.range_heights(o.rows, o.cols, o.tileable),
+            || self.range_heights(o.rows, o.cols, o.seed),
             || -> Result<SynthesisCache> {
                 // One image alone draws its noise and lets it go (at 4096^2 a GMRF's noise
                 // is over 500 MB); more than one keep it to share.
@@ -468,71 +456,66 @@ impl MaterialModel {
         Ok(cache)
     }
 
-    /// The range map over `rows` x `cols` output texels (mirror-tiled, bilinearly upsampled from
-    /// the stored tile), in texels; `None` without a range map. Mirror tiling repeats every two
-    /// tiles; with `tileable` the map is stretched slightly so that a whole number of those
-    /// periods fits the output, which then wraps seamlessly.
-    pub fn range_heights(&self, rows: usize, cols: usize, tileable: bool) -> Option<Array2<f64>> {
+    /// The range map over `rows` x `cols` output texels, in texels; `None` without a range
+    /// map. The stored map is quilted ([`quilt`], seeded by `seed`) onto a torus of about
+    /// `rows / step` x `cols / step` samples and resampled to the output, so the relief keeps
+    /// its measured structure, repeats on no grid, and the result tiles exactly at any size.
+    pub fn range_heights(&self, rows: usize, cols: usize, seed: u64) -> Option<Array2<f64>> {
         let map = self.range_map.as_ref()?;
-        let tile = Array2::from_shape_vec(
-            (map.rows, map.cols),
-            map.heights.iter().map(|&h| f64::from(h)).collect(),
-        )
-        .ok()?;
-        // Mirror tiling plus bilinear upsampling is separable: one set of taps per axis.
-        let taps = |out: usize, n: usize| -> Taps {
-            let period = (2 * n * map.step) as f64;
-            let scale = if tileable {
-                out as f64 / ((out as f64 / period).round().max(1.0) * period)
-            } else {
-                1.0
-            };
-            let fold = |i: isize| {
-                let m = i.rem_euclid(2 * n as isize);
-                (if m < n as isize {
-                    m
-                } else {
-                    2 * n as isize - 1 - m
-                }) as usize
-            };
-            (0..out)
-                .map(|i| {
-                    let u = (i as f64 + 0.5) / scale / map.step as f64 - 0.5;
-                    let (i0, f) = (u.floor(), u - u.floor());
-                    vec![(fold(i0 as isize), 1.0 - f), (fold(i0 as isize + 1), f)]
-                })
-                .collect()
+        let side = |n: usize| ((n as f64 / map.step as f64).round() as usize).max(1);
+        let torus = quilt(
+            &map.samples(),
+            side(rows),
+            side(cols),
+            crate::mrf::noise::mix(seed, RANGE_SEED),
+        );
+        Some(resample_periodic(&torus, rows.max(1), cols.max(1)))
+    }
+
+    /// The bump strength for `light`: the measured lights' fitted strengths
+    /// ([`crate::geometry::relight`]) blended with the same barycentric weights as the images,
+    /// so it changes continuously with the light; 1 without stored strengths.
+    ///
+    /// # Errors
+    /// A non-finite direction.
+    pub fn bump_strength(&self, light: &Direction) -> Result<f64> {
+        let Some(map) = &self.range_map else {
+            return Ok(1.0);
         };
-        Some(apply_separable(
-            &tile,
-            &taps(rows, map.rows),
-            &taps(cols, map.cols),
-        ))
+        Ok(self
+            .lights
+            .interpolate(light)?
+            .iter()
+            .map(|w| w.weight * map.strength_of(w.index))
+            .sum())
     }
 }
 
-/// Bump mapping (mrf_math.md 1(g)): multiplies an image by `max(0, n . l) / mean(max(0, n . l))`
-/// for the unit normals `n` of `heights` (range-map texels, differences as `border` says).
-/// Dividing by the mean keeps the subspace image's own average shading from being applied
-/// twice. Lights so low that almost nothing is lit leave the image as it is.
+/// Mixed into the synthesis seed for the range map's quilt (the bands use their own indices).
+const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
+
+/// Bump mapping (mrf_math.md 1(g)): multiplies an image by the shading factor
+/// `1 + strength (s - 1)`, `s = max(0, n . l) / mean(max(0, n . l))`, of the unit normals `n`
+/// of `heights` (range-map texels, differences as `border` says); see
+/// [`crate::geometry::relight`]. The factor's mean is 1, so the subspace image's own average
+/// shading is not applied twice. Lights so low that almost nothing is lit leave the image as
+/// it is.
 pub fn bump_relight(
     image: &mut Array3<f32>,
     heights: &Array2<f64>,
     border: NormalBorder,
     light: &Direction,
+    strength: f64,
 ) {
     let l = light.vector();
-    let shade = shading(heights, border, [l[0], l[1], l[2]]);
-    let mean = shade.sum() / shade.len().max(1) as f64;
-    if mean < 1e-3 {
+    let Some(factor) = shading_factor(heights, border, [l[0], l[1], l[2]], strength) else {
         return;
-    }
-    let inv = 1.0 / mean;
+    };
     image
         .axis_iter_mut(Axis(0))
         .into_par_iter()
         .for_each(|mut channel| {
-            channel.zip_mut_with(&shade, |v, s| *v *= (s * inv) as f32);
+            channel.zip_mut_with(&factor, |v, s| *v *= *s as f32);
         });
 }
 

@@ -186,7 +186,10 @@ impl DirectionSet {
     /// The directions are triangulated (Delaunay) in the azimuthal-equidistant projection
     /// `theta * (cos phi, sin phi)`; a query outside the sampled cap (e.g. theta 85 deg for the
     /// Bonn set, whose last ring is 75 deg) is projected onto the nearest triangle, and a query
-    /// below the horizon is treated as lying on it. A sampled direction gets weight 1 on itself.
+    /// below the horizon is treated as lying on it, or on the lowest sample if that lies lower
+    /// (real RTI domes list lights slightly below the horizon). The weights are continuous in
+    /// the query (piecewise linear in the projected plane), and a sampled direction gets
+    /// weight 1 on itself.
     ///
     /// # Errors
     /// A direction with a non-finite angle.
@@ -197,7 +200,12 @@ impl DirectionSet {
                 format!("theta={} phi={} is not finite", d.theta_deg, d.phi_deg),
             ));
         }
-        let q = project(&Direction::new(d.theta_deg.clamp(0.0, 90.0), d.phi_deg));
+        let lowest = self
+            .directions
+            .iter()
+            .map(|s| s.theta_deg)
+            .fold(90.0, f64::max);
+        let q = project(&Direction::new(d.theta_deg.clamp(0.0, lowest), d.phi_deg));
         let points: Vec<[f64; 2]> = self.directions.iter().map(project).collect();
         let triangles = self.triangles.get_or_init(|| triangulate(&points));
         let nearest = |q: [f64; 2]| {
@@ -388,6 +396,45 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn samples_below_the_horizon_interpolate_to_themselves() {
+        // An RTI dome: a ring at 60 deg, the zenith, and two lights just below the horizon.
+        let mut dirs: Vec<Direction> = (0..8)
+            .map(|k| Direction::new(60.0, 45.0 * k as f64))
+            .collect();
+        dirs.extend([
+            Direction::new(0.0, 0.0),
+            Direction::new(90.07, 16.0),
+            Direction::new(91.5, 200.0),
+        ]);
+        let set = DirectionSet::new(dirs).unwrap();
+        for (i, d) in set.iter().enumerate() {
+            let w = set.interpolate(d).unwrap();
+            let own: f64 = w.iter().filter(|x| x.index == i).map(|x| x.weight).sum();
+            assert_abs_diff_eq!(own, 1.0, epsilon = 1e-9);
+        }
+        // Continuous: a fine sweep (0.01 deg steps) across the set moves every weight by little
+        // per step. (The thinnest triangle here, two ring lights and the 90.07 deg one nearly
+        // collinear, is 0.006 rad high: 0.03 of weight per step there; a jump would be ~1.)
+        let mut last: Option<Vec<f64>> = None;
+        for k in 0..=36000 {
+            let q = Direction::new(75.0, k as f64 * 0.01);
+            let mut full = vec![0.0; set.len()];
+            for x in set.interpolate(&q).unwrap() {
+                full[x.index] += x.weight;
+            }
+            if let Some(prev) = &last {
+                let jump = full
+                    .iter()
+                    .zip(prev)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max);
+                assert!(jump < 0.05, "step {k}: weights jump by {jump}");
+            }
+            last = Some(full);
         }
     }
 

@@ -1,11 +1,14 @@
-//! Surface geometry: normals by photometric stereo, and the range map (height field) they
-//! integrate to.
+//! Surface geometry: normals by photometric stereo, the range map (height field) they
+//! integrate to, its seamless enlargement, and the bump shading it gives under a light.
 
 pub mod integrate;
 pub mod photometric_stereo;
+pub mod quilt;
+pub mod relight;
 
 pub use integrate::{frankot_chellappa, normals_of};
 pub use photometric_stereo::{NormalMap, estimate_normals, frontal_view};
+pub use quilt::{quilt, resample_periodic};
 
 use ndarray::Array2;
 

@@ -168,7 +168,7 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
     match &model.range_map {
         None => w.u8(0),
         Some(r) => {
-            w.u8(1);
+            w.u8(if r.strength.is_empty() { 1 } else { 2 });
             w.u16(r.rows as u16);
             w.u16(r.cols as u16);
             w.u16(r.step as u16);
@@ -186,6 +186,12 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
                     0.0
                 };
                 w.u16(q as u16);
+            }
+            if !r.strength.is_empty() {
+                w.u16(r.strength.len() as u16);
+                for &k in &r.strength {
+                    w.f32(f64::from(k));
+                }
             }
         }
     }
@@ -426,7 +432,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     }
     let range_map = match r.u8()? {
         0 => None,
-        1 => {
+        flag @ (1 | 2) => {
             let (rows, cols) = (usize::from(r.u16()?), usize::from(r.u16()?));
             let step = usize::from(r.u16()?);
             if rows == 0 || cols == 0 || step == 0 {
@@ -437,11 +443,25 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             let heights = (0..rows * cols)
                 .map(|_| Ok((lo + quantum * f64::from(r.u16()?)) as f32))
                 .collect::<Parse<Vec<f32>>>()?;
+            let strength = if flag == 2 {
+                let n = usize::from(r.u16()?);
+                if n != lights.len() {
+                    return Err(format!("{n} bump strengths for {} lights", lights.len()));
+                }
+                let values = r.f32s(n)?;
+                if let Some(bad) = values.iter().find(|k| !(0.0..=1.0).contains(*k)) {
+                    return Err(format!("bump strength {bad} is outside 0..=1"));
+                }
+                values.into_iter().map(|k| k as f32).collect()
+            } else {
+                Vec::new()
+            };
             Some(RangeMap {
                 heights,
                 rows,
                 cols,
                 step,
+                strength,
             })
         }
         f => return Err(format!("unknown range map flag {f}")),

@@ -1,10 +1,13 @@
 //! The material model: everything needed to synthesize a BTF, a few tens of kilobytes.
 
+use ndarray::Array2;
+
 use crate::btf::DirectionSet;
 use crate::decompose::KlBasis;
 #[cfg(doc)]
 use crate::decompose::marginals::BAND_QUANTILES;
 use crate::decompose::marginals::{QuantileGrid, Quantiles};
+use crate::decompose::pyramid::{Taps, apply_separable};
 use crate::mrf::{Car2dModel, Car3dModel, GmrfModel};
 
 /// Which MRF models the bands.
@@ -100,20 +103,57 @@ pub struct BandMarginals {
     pub tables: Vec<[Vec<f64>; 3]>,
 }
 
-/// A range map (height field) tile for bump or displacement mapping, estimated by photometric
-/// stereo. It covers the measured image; larger areas are covered by mirror tiling (heights stay
-/// continuous across tile borders).
+/// A range map (height field) for bump or displacement mapping, estimated by photometric
+/// stereo on the measured images. Larger areas are covered by quilting it seamlessly
+/// ([`crate::geometry::quilt`]), not by repeating it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RangeMap {
     /// Heights in texels of the measured image, row-major, `rows * cols` samples.
     pub heights: Vec<f32>,
-    /// Rows of the stored tile.
+    /// Rows of the stored map.
     pub rows: usize,
-    /// Columns of the stored tile.
+    /// Columns of the stored map.
     pub cols: usize,
     /// Measured texels per stored sample (1 = full resolution; larger maps are averaged down
     /// to keep models small).
     pub step: usize,
+    /// Bump strength per measured light ([`crate::geometry::relight`]), fitted to the frontal
+    /// images; empty in files from before it was stored, which means 1 for every light.
+    pub strength: Vec<f32>,
+}
+
+impl RangeMap {
+    /// The stored samples as an array, (rows, cols).
+    pub fn samples(&self) -> Array2<f64> {
+        Array2::from_shape_fn((self.rows, self.cols), |(r, c)| {
+            f64::from(self.heights[r * self.cols + c])
+        })
+    }
+
+    /// The map on the measured images' pixel grid, `rows` x `cols` texels (bilinear, edges
+    /// repeated): registered with the images it was estimated from.
+    pub fn registered(&self, rows: usize, cols: usize) -> Array2<f64> {
+        let taps = |out: usize, n: usize| -> Taps {
+            (0..out)
+                .map(|i| {
+                    let u = ((i as f64 + 0.5) / self.step as f64 - 0.5).clamp(0.0, (n - 1) as f64);
+                    let i0 = (u.floor() as usize).min(n - 1);
+                    let f = u - i0 as f64;
+                    vec![(i0, 1.0 - f), ((i0 + 1).min(n - 1), f)]
+                })
+                .collect()
+        };
+        apply_separable(
+            &self.samples(),
+            &taps(rows, self.rows),
+            &taps(cols, self.cols),
+        )
+    }
+
+    /// The bump strength fitted for measured light `light` (1 where none was stored).
+    pub fn strength_of(&self, light: usize) -> f64 {
+        self.strength.get(light).map_or(1.0, |&k| f64::from(k))
+    }
 }
 
 /// A whole material: clustering, subspace models and range map. Written as `.btfm`.

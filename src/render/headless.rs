@@ -488,7 +488,7 @@ impl Renderer {
     ) -> Result<RenderOutput> {
         let (rows, cols) = (cache.options().rows, cache.options().cols);
         let heights = match mapping {
-            Mapping::Displacement => model.range_heights(rows, cols, cache.options().tileable),
+            Mapping::Displacement => model.range_heights(rows, cols, cache.options().seed),
             _ => None,
         };
         let tables =

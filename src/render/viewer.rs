@@ -160,7 +160,7 @@ impl App<'_> {
         )?;
         let tables = MaterialTables::new(model, &cache, None)?;
         let bump_material = GpuMaterial::new(&ctx, &pipelines, &cache, None, &tables)?;
-        let heights = model.range_heights(n, n, true);
+        let heights = model.range_heights(n, n, o.seed);
         let displaced_material =
             GpuMaterial::new(&ctx, &pipelines, &cache, heights.as_ref(), &tables)?;
         let mut meshes = Vec::new();

@@ -1,0 +1,463 @@
+//! Seamless enlargement of a range map that keeps its structure: image quilting (Efros and
+//! Freeman 2001) of patches of the measured map on a torus of the requested size, joined by
+//! minimum-error boundary cuts (mrf_math.md 1(f'), "range map enlarged by structure-preserving
+//! tiling"; seed 001, sec. 7.6 enlarges by plain tiling, which repeats the map with seams).
+//!
+//! Patches are translated copies only: a flipped or rotated relief would shade the wrong way
+//! under a directional light. The output is defined on the torus, so it tiles exactly; every
+//! join (including the wrap-around) is a cut through an overlap where the two patches agree.
+
+use ndarray::Array2;
+use rand::{RngExt, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use rayon::prelude::*;
+
+/// Patch side as a fraction of the source's smaller side (patches much smaller than the
+/// source give many candidates; much larger keep more of each structure intact).
+const PATCH_DIVISOR: usize = 3;
+/// Bounds of the patch side, samples.
+const PATCH_SIDE: (usize, usize) = (6, 64);
+/// Overlap as a fraction of the patch side.
+const OVERLAP_DIVISOR: usize = 5;
+/// Candidates whose overlap error is within this factor of the best are equally likely.
+const TOLERANCE: f64 = 1.1;
+/// At most this many candidate offsets per axis are scored (the rest are skipped evenly).
+const CANDIDATES_PER_AXIS: usize = 48;
+
+/// Where the patches sit along one axis of the torus: patch `k` covers
+/// `starts[k] - overlap .. starts[k + 1]` (indices modulo the axis length).
+#[derive(Debug, Clone, PartialEq)]
+struct Layout {
+    starts: Vec<usize>,
+    overlap: usize,
+}
+
+impl Layout {
+    /// As many patches of `patch` samples (stepping `patch - overlap`) as fit `len` evenly; a
+    /// torus too small for two patches gets one, without overlap.
+    fn new(len: usize, patch: usize, overlap: usize) -> Self {
+        let stride = patch.saturating_sub(overlap).max(1);
+        let n = ((len as f64 / stride as f64).round() as usize).clamp(1, len.max(1));
+        let starts: Vec<usize> = (0..=n).map(|k| (k * len + n / 2) / n).collect();
+        let shortest = starts.windows(2).map(|w| w[1] - w[0]).min().unwrap_or(0);
+        let overlap = if n == 1 {
+            0
+        } else {
+            overlap.min(shortest.saturating_sub(1))
+        };
+        Self { starts, overlap }
+    }
+
+    fn patches(&self) -> usize {
+        self.starts.len() - 1
+    }
+
+    /// First torus index and length of patch `k`.
+    fn span(&self, k: usize, len: usize) -> (usize, usize) {
+        let first = (self.starts[k] + len - self.overlap) % len.max(1);
+        (first, self.starts[k + 1] - self.starts[k] + self.overlap)
+    }
+}
+
+/// Quilts `source` (heights, any units) into a `rows` x `cols` torus with seed `seed`: same
+/// seed, same output. Patch side about a third of the source's smaller side.
+///
+/// Only the relief finer than a patch is quilted: variation on larger scales (the bow that
+/// photometric stereo leaves over a whole capture, or an object's overall shape) is removed
+/// first (a Gaussian high-pass, sigma half a patch), because patches from different heights
+/// would meet in steps; the output keeps the source's mean.
+///
+/// # Panics
+/// An empty source or a zero output size (callers check both).
+pub fn quilt(source: &Array2<f64>, rows: usize, cols: usize, seed: u64) -> Array2<f64> {
+    quilt_patches(source, rows, cols, seed).0
+}
+
+/// [`quilt`], with the index of the patch every sample came from.
+fn quilt_patches(
+    source: &Array2<f64>,
+    rows: usize,
+    cols: usize,
+    seed: u64,
+) -> (Array2<f64>, Array2<u32>) {
+    let (sr, sc) = source.dim();
+    assert!(sr > 0 && sc > 0 && rows > 0 && cols > 0, "empty quilt");
+    let patch = (sr.min(sc) / PATCH_DIVISOR).clamp(PATCH_SIDE.0, PATCH_SIDE.1);
+    let overlap = (patch / OVERLAP_DIVISOR).max(1);
+    let sigma = patch as f64 / 2.0;
+    let source = &high_pass(source, sigma, false);
+    let (lr, lc) = (
+        Layout::new(rows, patch.min(sr), overlap),
+        Layout::new(cols, patch.min(sc), overlap),
+    );
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let mut out = Array2::<f64>::zeros((rows, cols));
+    let mut filled = Array2::<bool>::from_elem((rows, cols), false);
+    let mut label = Array2::<u32>::zeros((rows, cols));
+    for i in 0..lr.patches() {
+        for j in 0..lc.patches() {
+            let (r0, hr) = lr.span(i, rows);
+            let (c0, hc) = lc.span(j, cols);
+            let at = |y: usize, x: usize| ((r0 + y) % rows, (c0 + x) % cols);
+            let known: Vec<(usize, usize, f64)> = (0..hr)
+                .flat_map(|y| (0..hc).map(move |x| (y, x)))
+                .filter_map(|(y, x)| {
+                    let p = at(y, x);
+                    filled[p].then(|| (y, x, out[p]))
+                })
+                .collect();
+            let (y0, x0, lift) = choose(source, hr, hc, &known, &mut rng);
+            let src = |y: usize, x: usize| source[((y0 + y) % sr, (x0 + x) % sc)] + lift;
+            let error = Array2::from_shape_fn((hr, hc), |(y, x)| {
+                let p = at(y, x);
+                if filled[p] {
+                    (src(y, x) - out[p]).powi(2)
+                } else {
+                    0.0
+                }
+            });
+            let taken = take_mask(&error, |y, x| filled[at(y, x)], lr.overlap, lc.overlap);
+            let id = (i * lc.patches() + j) as u32;
+            for y in 0..hr {
+                for x in 0..hc {
+                    if taken[(y, x)] {
+                        let p = at(y, x);
+                        out[p] = src(y, x);
+                        filled[p] = true;
+                        label[p] = id;
+                    }
+                }
+            }
+        }
+    }
+    // The lifts wander from patch to patch; take out what that adds above the patch scale,
+    // and keep the source's mean level.
+    let mut out = high_pass(&out, sigma, true);
+    out += source.mean().unwrap_or(0.0) - out.mean().unwrap_or(0.0);
+    (out, label)
+}
+
+/// `field` minus its Gaussian blur of standard deviation `sigma` samples (edges repeated, or
+/// wrapped around for a torus), at the field's mean level: the detail finer than about `sigma`.
+fn high_pass(field: &Array2<f64>, sigma: f64, wrap: bool) -> Array2<f64> {
+    let radius = (3.0 * sigma).ceil() as isize;
+    let kernel: Vec<f64> = (-radius..=radius)
+        .map(|k| (-(k * k) as f64 / (2.0 * sigma * sigma)).exp())
+        .collect();
+    let total: f64 = kernel.iter().sum();
+    let taps = |n: usize| -> crate::decompose::pyramid::Taps {
+        (0..n as isize)
+            .map(|i| {
+                (-radius..=radius)
+                    .map(|k| {
+                        let j = if wrap {
+                            (i + k).rem_euclid(n as isize)
+                        } else {
+                            (i + k).clamp(0, n as isize - 1)
+                        } as usize;
+                        (j, kernel[(k + radius) as usize] / total)
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let blur = crate::decompose::pyramid::apply_separable(
+        field,
+        &taps(field.nrows()),
+        &taps(field.ncols()),
+    );
+    let detail = field - &blur;
+    let lift = field.mean().unwrap_or(0.0) - detail.mean().unwrap_or(0.0);
+    detail + lift
+}
+
+/// The source offset of the next patch and the height it is lifted by: uniformly among the
+/// candidates whose squared error against the `known` output samples (patch row, column,
+/// value), after the best lift (the mean difference), is within [`TOLERANCE`] of the best.
+/// Lifting lets patches from different heights meet without a step. Offsets beyond the source
+/// wrap around it (only for sources smaller than a patch).
+fn choose(
+    source: &Array2<f64>,
+    hr: usize,
+    hc: usize,
+    known: &[(usize, usize, f64)],
+    rng: &mut Xoshiro256PlusPlus,
+) -> (usize, usize, f64) {
+    let (sr, sc) = source.dim();
+    let offsets = |s: usize, h: usize| -> Vec<usize> {
+        let count = if h <= s { s - h + 1 } else { s };
+        let stride = count.div_ceil(CANDIDATES_PER_AXIS);
+        (0..count).step_by(stride).collect()
+    };
+    let (ys, xs) = (offsets(sr, hr), offsets(sc, hc));
+    let candidates: Vec<(usize, usize)> = ys
+        .iter()
+        .flat_map(|&y| xs.iter().map(move |&x| (y, x)))
+        .collect();
+    if known.is_empty() {
+        let (y, x) = candidates[rng.random_range(0..candidates.len())];
+        return (y, x, 0.0);
+    }
+    let n = known.len() as f64;
+    let scored: Vec<(f64, f64)> = candidates
+        .par_iter()
+        .map(|&(y0, x0)| {
+            let (sum, sq) = known.iter().fold((0.0, 0.0), |(sum, sq), &(y, x, v)| {
+                let d = v - source[((y0 + y) % sr, (x0 + x) % sc)];
+                (sum + d, sq + d * d)
+            });
+            ((sq - sum * sum / n).max(0.0), sum / n)
+        })
+        .collect();
+    let best = scored.iter().map(|s| s.0).fold(f64::INFINITY, f64::min);
+    let limit = best * TOLERANCE + 1e-12;
+    let good: Vec<usize> = (0..scored.len())
+        .filter(|&k| scored[k].0 <= limit)
+        .collect();
+    let pick = good[rng.random_range(0..good.len())];
+    (candidates[pick].0, candidates[pick].1, scored[pick].1)
+}
+
+/// Which samples of a patch replace the output: every unknown sample, and the known ones on
+/// the patch's side of the minimum-error cut through each overlap band (left, right, top,
+/// bottom) that is already filled. `error` is the squared difference (0 where unknown).
+fn take_mask(
+    error: &Array2<f64>,
+    known: impl Fn(usize, usize) -> bool,
+    overlap_rows: usize,
+    overlap_cols: usize,
+) -> Array2<bool> {
+    let (hr, hc) = error.dim();
+    let (or, oc) = (overlap_rows.min(hr), overlap_cols.min(hc));
+    let active = |y: usize, x: usize, band: usize| band > 0 && known(y, x);
+    let left = active(hr / 2, oc / 2, oc).then(|| min_cut(error, 0..oc));
+    let right = active(hr / 2, hc - 1 - oc / 2, oc).then(|| min_cut(error, hc - oc..hc));
+    let t = error.t().to_owned();
+    let top = active(or / 2, hc / 2, or).then(|| min_cut(&t, 0..or));
+    let bottom = active(hr - 1 - or / 2, hc / 2, or).then(|| min_cut(&t, hr - or..hr));
+    Array2::from_shape_fn((hr, hc), |(y, x)| {
+        !known(y, x)
+            || (left.as_ref().is_none_or(|p| x >= oc || x >= p[y])
+                && right.as_ref().is_none_or(|p| x < hc - oc || x <= p[y])
+                && top.as_ref().is_none_or(|p| y >= or || y >= p[x])
+                && bottom.as_ref().is_none_or(|p| y < hr - or || y <= p[x]))
+    })
+}
+
+/// The cheapest top-to-bottom path through columns `band` of `cost` (one column per row,
+/// moving at most one column between rows), by dynamic programming; the path's column per row.
+fn min_cut(cost: &Array2<f64>, band: std::ops::Range<usize>) -> Vec<usize> {
+    let rows = cost.nrows();
+    let (lo, w) = (band.start, band.len());
+    let mut total = Array2::<f64>::zeros((rows, w));
+    for y in 0..rows {
+        for x in 0..w {
+            let above = if y == 0 {
+                0.0
+            } else {
+                (x.saturating_sub(1)..(x + 2).min(w))
+                    .map(|k| total[(y - 1, k)])
+                    .fold(f64::INFINITY, f64::min)
+            };
+            total[(y, x)] = cost[(y, lo + x)] + above;
+        }
+    }
+    let argmin = |y: usize, range: std::ops::Range<usize>| {
+        range
+            .min_by(|&a, &b| total[(y, a)].total_cmp(&total[(y, b)]))
+            .unwrap_or(0)
+    };
+    let mut path = vec![0; rows];
+    let mut x = argmin(rows - 1, 0..w);
+    for y in (0..rows).rev() {
+        if y + 1 < rows {
+            x = argmin(y, x.saturating_sub(1)..(x + 2).min(w));
+        }
+        path[y] = lo + x;
+    }
+    path
+}
+
+/// Bilinear resampling of a periodic `tile` (one period) to `rows` x `cols`: the tile is
+/// stretched to span the output exactly, so the output is periodic too.
+pub fn resample_periodic(tile: &Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
+    let taps = |out: usize, n: usize| -> crate::decompose::pyramid::Taps {
+        let scale = n as f64 / out as f64;
+        (0..out)
+            .map(|i| {
+                let u = (i as f64 + 0.5) * scale - 0.5;
+                let (i0, f) = (u.floor(), u - u.floor());
+                let wrap = |k: f64| (k as isize).rem_euclid(n as isize) as usize;
+                vec![(wrap(i0), 1.0 - f), (wrap(i0 + 1.0), f)]
+            })
+            .collect()
+    };
+    crate::decompose::pyramid::apply_separable(
+        tile,
+        &taps(rows, tile.nrows()),
+        &taps(cols, tile.ncols()),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A relief with structure: randomly placed elongated ridges on a broad bow.
+    fn ridges(rows: usize, cols: usize, seed: u64) -> Array2<f64> {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        let bumps: Vec<[f64; 4]> = (0..40)
+            .map(|_| {
+                [
+                    rng.random_range(0.0..rows as f64),
+                    rng.random_range(0.0..cols as f64),
+                    rng.random_range(0.0..std::f64::consts::PI),
+                    rng.random_range(1.0..4.0),
+                ]
+            })
+            .collect();
+        Array2::from_shape_fn((rows, cols), |(y, x)| {
+            bumps
+                .iter()
+                .map(|&[by, bx, a, h]| {
+                    let (dy, dx) = (y as f64 - by, x as f64 - bx);
+                    let (u, v) = (dx * a.cos() + dy * a.sin(), -dx * a.sin() + dy * a.cos());
+                    h * (-(u / 12.0).powi(2) - (v / 2.5).powi(2)).exp()
+                })
+                .sum::<f64>()
+                + 0.002 * ((y as f64 - rows as f64 / 2.0).powi(2) + (x as f64).powi(2)) / 10.0
+        })
+    }
+
+    /// A quilted field and, per sample, the index of the patch it came from.
+    struct Quilt {
+        heights: Array2<f64>,
+        patch: Array2<u32>,
+    }
+
+    /// Mean |difference| of horizontal and vertical torus neighbours, split into pairs from
+    /// the same patch and pairs across a cut.
+    fn neighbour_steps(q: &Quilt) -> (f64, f64) {
+        let (h, w) = q.heights.dim();
+        let (mut same, mut ns, mut cut, mut nc) = (0.0, 0usize, 0.0, 0usize);
+        for y in 0..h {
+            for x in 0..w {
+                for (yy, xx) in [(y, (x + 1) % w), ((y + 1) % h, x)] {
+                    let d = (q.heights[(y, x)] - q.heights[(yy, xx)]).abs();
+                    if q.patch[(y, x)] == q.patch[(yy, xx)] {
+                        (same, ns) = (same + d, ns + 1);
+                    } else {
+                        (cut, nc) = (cut + d, nc + 1);
+                    }
+                }
+            }
+        }
+        (same / ns as f64, cut / nc.max(1) as f64)
+    }
+
+    fn mean_std(a: &Array2<f64>) -> (f64, f64) {
+        let m = a.mean().unwrap();
+        (m, a.std(0.0))
+    }
+
+    #[test]
+    fn cuts_are_as_smooth_as_the_interior() {
+        let source = ridges(100, 100, 1);
+        let (heights, patch) = quilt_patches(&source, 240, 200, 7);
+        let (same, cut) = neighbour_steps(&Quilt { heights, patch });
+        println!("neighbour step: within patches {same:.4}, across cuts {cut:.4}");
+        assert!(cut < 2.5 * same, "cut {cut} vs interior {same}");
+        // Without cuts or matching (every patch at a random offset, straight joins) the joins
+        // are far rougher: the test can tell a seam.
+        let naive = Quilt {
+            heights: Array2::from_shape_fn((240, 200), |(y, x)| {
+                let (py, px) = (y / 30, x / 30);
+                let (oy, ox) = ((py * 37 + px * 11) % 70, (py * 13 + px * 29) % 70);
+                source[(oy + y % 30, ox + x % 30)]
+            }),
+            patch: Array2::from_shape_fn((240, 200), |(y, x)| (y / 30 * 7 + x / 30) as u32),
+        };
+        let (same_n, cut_n) = neighbour_steps(&naive);
+        println!("naive: within patches {same_n:.4}, across joins {cut_n:.4}");
+        assert!(cut_n > 4.0 * same_n, "naive {cut_n} vs {same_n}");
+    }
+
+    #[test]
+    fn the_torus_wraps_like_the_interior() {
+        let source = ridges(90, 120, 2);
+        let q = quilt(&source, 150, 170, 3);
+        let (h, w) = q.dim();
+        let step = |a: f64, b: f64| (a - b).abs();
+        let wrap: f64 = (0..h).map(|y| step(q[(y, 0)], q[(y, w - 1)])).sum::<f64>() / h as f64;
+        let inner: f64 = (0..h)
+            .flat_map(|y| (0..w - 1).map(move |x| (y, x)))
+            .map(|(y, x)| step(q[(y, x)], q[(y, x + 1)]))
+            .sum::<f64>()
+            / (h * (w - 1)) as f64;
+        assert!(wrap < 1.5 * inner, "wrap {wrap} vs inner {inner}");
+    }
+
+    #[test]
+    fn height_statistics_match_the_source_detail() {
+        let source = ridges(100, 100, 4);
+        let patch = 100 / PATCH_DIVISOR;
+        let detail = high_pass(&source, patch as f64 / 2.0, false);
+        let (ms, ss) = mean_std(&detail);
+        assert!((ms - source.mean().unwrap()).abs() < 1e-9);
+        for seed in 0..3 {
+            let (mq, sq) = mean_std(&quilt(&source, 300, 300, seed));
+            println!("source {ms:.3} +- {ss:.3}; quilt {mq:.3} +- {sq:.3}");
+            assert!((mq - ms).abs() < 0.25 * ss, "mean {mq} vs {ms}");
+            assert!((sq / ss - 1.0).abs() < 0.25, "std {sq} vs {ss}");
+        }
+    }
+
+    #[test]
+    fn deterministic_per_seed_and_any_size() {
+        let source = ridges(40, 50, 6);
+        assert_eq!(quilt(&source, 70, 90, 1), quilt(&source, 70, 90, 1));
+        assert_ne!(quilt(&source, 70, 90, 1), quilt(&source, 70, 90, 2));
+        for (r, c) in [(1, 1), (2, 7), (5, 3), (13, 200), (41, 50)] {
+            let q = quilt(&source, r, c, 3);
+            assert_eq!(q.dim(), (r, c));
+            assert!(q.iter().all(|v| v.is_finite()));
+        }
+        // A flat source stays flat; a source smaller than a patch still works.
+        let flat = Array2::from_elem((30, 30), 2.5);
+        assert!(
+            quilt(&flat, 50, 40, 1)
+                .iter()
+                .all(|&v| (v - 2.5).abs() < 1e-12)
+        );
+        let tiny = ridges(3, 4, 7);
+        assert_eq!(quilt(&tiny, 20, 30, 1).dim(), (20, 30));
+    }
+
+    #[test]
+    fn min_cut_follows_the_cheap_valley() {
+        let mut cost = Array2::from_elem((6, 5), 1.0);
+        for y in 0..6 {
+            cost[(y, if y < 3 { 1 } else { 2 })] = 0.0;
+        }
+        assert_eq!(min_cut(&cost, 0..5), vec![1, 1, 1, 2, 2, 2]);
+        assert_eq!(min_cut(&cost, 2..5), vec![2, 2, 2, 2, 2, 2]);
+    }
+
+    #[test]
+    fn periodic_resampling_commutes_with_rolling() {
+        let tile = ridges(20, 30, 8);
+        let out = resample_periodic(&tile, 60, 90);
+        // Rolling the tile by one sample rolls the 3x output by three.
+        let rolled = Array2::from_shape_fn((20, 30), |(y, x)| tile[((y + 1) % 20, (x + 1) % 30)]);
+        let out_rolled = resample_periodic(&rolled, 60, 90);
+        for y in 0..60 {
+            for x in 0..90 {
+                let expect = out[((y + 3) % 60, (x + 3) % 90)];
+                assert!((out_rolled[(y, x)] - expect).abs() < 1e-12);
+            }
+        }
+        // Same size: the identity.
+        let same = resample_periodic(&tile, 20, 30);
+        assert!(same.iter().zip(&tile).all(|(a, b)| (a - b).abs() < 1e-12));
+    }
+}
