@@ -401,8 +401,10 @@ fn many_members_with_distinct_directions_fail_fast() {
     let dir = temp();
     let zip = dir.path().join("many.zip");
     write_zip(&zip, &members_with_distinct_directions(3000, b""));
-    let btf = btfmrf::btf::Btf::open(&zip);
-    let err = btf.err().expect("an incomplete layout").to_string();
+    let Err(err) = btfmrf::btf::Btf::open(&zip) else {
+        panic!("an incomplete layout must be refused");
+    };
+    let err = err.to_string();
     assert!(
         err.contains(
             "8997000 of 9000000 (view, light) images missing, e.g. tl001 pl001 tv001 pv000"
@@ -503,10 +505,11 @@ fn lpca_refuses_more_lights_than_its_format_holds() {
         components: 1,
         ..Default::default()
     };
-    let err = btfmrf::lpca::LpcaModel::fit(&btf, &options, &btfmrf::progress::NoProgress)
-        .err()
-        .expect("refused")
-        .to_string();
+    let Err(err) = btfmrf::lpca::LpcaModel::fit(&btf, &options, &btfmrf::progress::NoProgress)
+    else {
+        panic!("more lights than the format holds must be refused");
+    };
+    let err = err.to_string();
     assert!(
         err.contains("65536 lights") && err.contains("at most 65535"),
         "{err}"

@@ -353,6 +353,10 @@ fn interrupts_remove_temporaries() {
 /// Exit status, peak resident set (bytes) and stderr of the binary.
 fn measured(args: &[&str]) -> (i32, u64, String) {
     let err_file = tempfile::NamedTempFile::new().unwrap();
+    #[expect(
+        clippy::zombie_processes,
+        reason = "reaped by wait4 below, which also reports the peak memory"
+    )]
     let child = Command::new(env!("CARGO_BIN_EXE_btfmrf"))
         .args(args)
         .stdout(Stdio::null())

@@ -180,9 +180,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                     .map(|p| 1usize << p)
                     .rev()
                     .find(|&s| need(s) <= budget);
-                fits.map_or("nothing fits".into(), |s| {
-                    format!("--tile {s} fits")
-                })
+                fits.map_or("nothing fits".into(), |s| format!("--tile {s} fits"))
             },
         )?;
         Renderer::new()?.render_model(
