@@ -188,9 +188,8 @@ fn judge_models(material: SyntheticMaterial, kinds: &[ModelKind]) -> Vec<(ModelK
 /// level; colour 3.15 and 2.91 Lab. After the colour (KL in Lab), relighting (measured bump
 /// strength, shading divided out of the frontal images) and CAR stability changes were merged
 /// together, sponge measures x1.64 and stones x1.11 (colour 3.22 and 1.80 Lab): a structure
-/// regression on the relit
-/// image that issue 11 must explain. Issue 11's target is x1.0 random phase, then the crop
-/// level.
+/// regression on the relit image that issue 11 must explain. Issue 11's target is x1.0 random
+/// phase, then the crop level.
 #[test]
 fn the_default_model_stays_near_the_random_phase_level() {
     for material in [SyntheticMaterial::Sponge, SyntheticMaterial::Stones] {
