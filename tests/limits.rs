@@ -680,8 +680,12 @@ fn targets(scratch: &Path) -> Vec<(&'static str, Target, Vec<Vec<u8>>)> {
         (
             "btfm",
             Box::new(move |d: &[u8]| {
+                // What parses re-encodes to a fixed point (older versions and non-canonical
+                // values are accepted and written in today's form, so not to the input).
                 if let Ok(m) = btfmrf::model::format::from_bytes(d, &p("f.btfm")) {
-                    assert_eq!(btfmrf::model::format::to_bytes(&m), d);
+                    let bytes = btfmrf::model::format::to_bytes(&m);
+                    let again = btfmrf::model::format::from_bytes(&bytes, &p("f.btfm")).unwrap();
+                    assert_eq!(btfmrf::model::format::to_bytes(&again), bytes);
                 }
             }) as Target,
             vec![model.clone()],
@@ -698,7 +702,9 @@ fn targets(scratch: &Path) -> Vec<(&'static str, Target, Vec<Vec<u8>>)> {
             Box::new(|d: &[u8]| {
                 let file = envelope(b"LPCA", d);
                 if let Ok(m) = btfmrf::lpca::format::from_bytes(&file, Path::new("f")) {
-                    assert_eq!(btfmrf::lpca::format::to_bytes(&m), file);
+                    let bytes = btfmrf::lpca::format::to_bytes(&m);
+                    let again = btfmrf::lpca::format::from_bytes(&bytes, Path::new("f")).unwrap();
+                    assert_eq!(btfmrf::lpca::format::to_bytes(&again), bytes);
                 }
             }),
             seeds("lpca"),

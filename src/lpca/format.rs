@@ -77,7 +77,11 @@ pub fn to_bytes(model: &LpcaModel) -> Vec<u8> {
         p.extend_from_slice(&(set.len() as u16).to_le_bytes());
         for d in set.iter() {
             p.extend_from_slice(&(d.theta_deg as f32).to_le_bytes());
-            p.extend_from_slice(&(d.phi_deg as f32).to_le_bytes());
+            // An azimuth just below 360 rounds up to 360.0 in single precision, which reads
+            // back as 0: write that 0 (fuzzing found the write-read-write difference).
+            let phi = d.phi_deg as f32;
+            let phi = if phi >= 360.0 { 0.0 } else { phi };
+            p.extend_from_slice(&phi.to_le_bytes());
         }
     }
     let halves = |p: &mut Vec<u8>, v: &[f32]| {
