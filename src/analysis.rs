@@ -137,12 +137,13 @@ pub fn analyze(
     let frontal = geometry::frontal_view(btf);
     let registered = range_map.as_ref().map(|m| m.registered(h, w));
     progress.start("fitting models", clustering.clusters() as u64);
-    let fitted: Vec<(SubspaceModel, Vec<String>)> = clustering
+    let fitted: Vec<(SubspaceModel, Vec<String>, f64)> = clustering
         .representatives
         .par_iter()
         .enumerate()
         .map(|(k, &(v, l))| {
             let mut image = btf.image(v, l)?;
+            let share = block_mean_share(&image);
             if let (Some(map), Some(heights), Some(light)) =
                 (&range_map, &registered, btf.lights().get(l))
                 && v == frontal
@@ -161,18 +162,19 @@ pub fn analyze(
                     ..subspace
                 },
                 notes,
+                share,
             ))
         })
         .collect::<Result<_>>()?;
     progress.finish();
-    report
-        .warnings
-        .extend(stationarity_warning(btf, &clustering.representatives)?);
     let mut subspaces = Vec::with_capacity(fitted.len());
-    for (s, notes) in fitted {
+    let mut shares = Vec::with_capacity(fitted.len());
+    for (s, notes, share) in fitted {
         subspaces.push(s);
         report.repairs.extend(notes);
+        shares.push(share);
     }
+    report.warnings.extend(stationarity_warning(shares));
     let model = MaterialModel {
         kind: options.kind,
         views: btf.views().clone(),
@@ -186,26 +188,21 @@ pub fn analyze(
     Ok((model, report))
 }
 
-/// A warning when the subspace images do not look like a stationary texture (the median of
-/// their [`block_mean_share`] above [`NON_STATIONARY_SHARE`]): their enlargement repeats the
-/// content, which is rarely what a user wants from an object or a painting.
-fn stationarity_warning(btf: &Btf, representatives: &[(usize, usize)]) -> Result<Option<String>> {
-    let mut shares: Vec<f64> = representatives
-        .par_iter()
-        .map(|&(v, l)| Ok(block_mean_share(&btf.image(v, l)?)))
-        .collect::<Result<_>>()?;
+/// A warning when the subspace images do not look like a stationary texture: the median of
+/// their [`block_mean_share`] (as measured, before any shading is divided out) above
+/// [`NON_STATIONARY_SHARE`]. Their enlargement repeats the content, which is rarely what a
+/// user wants from an object or a painting.
+fn stationarity_warning(mut shares: Vec<f64>) -> Option<String> {
     shares.sort_by(f64::total_cmp);
-    let Some(&median) = shares.get(shares.len() / 2) else {
-        return Ok(None);
-    };
-    Ok((median > NON_STATIONARY_SHARE).then(|| {
+    let median = *shares.get(shares.len() / 2)?;
+    (median > NON_STATIONARY_SHARE).then(|| {
         format!(
             "the input does not look like a stationary texture: {:.0} % of its luminance \
              variance lies in the means of a 4x4 grid of blocks (textures: a few %); an object, \
              a painting or one large motif is repeated as wallpaper when enlarged",
             100.0 * median
         )
-    }))
+    })
 }
 
 /// Photometric stereo on the frontal view, Frankot-Chellappa integration, averaging down to at

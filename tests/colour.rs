@@ -168,9 +168,13 @@ fn orientation(image: &Array3<f32>, halvings: usize) -> (f64, f64) {
     (coherence, angle)
 }
 
-/// Every subspace image of `model` synthesized at the measured size (seed 7) against its
-/// measured representative.
-fn subspace_colours(btf: &Btf, model: &MaterialModel) -> Vec<Colour> {
+/// `compare(synthesized, measured)` for every subspace image of `model`, synthesized at the
+/// measured size (seed 7), against its measured representative.
+fn per_subspace<T>(
+    btf: &Btf,
+    model: &MaterialModel,
+    compare: impl Fn(&Array3<f32>, &Array3<f32>) -> T,
+) -> Vec<T> {
     let o = SynthesisOptions {
         rows: btf.height() as usize,
         cols: btf.width() as usize,
@@ -184,10 +188,14 @@ fn subspace_colours(btf: &Btf, model: &MaterialModel) -> Vec<Colour> {
         .map(|(k, s)| {
             let (v, l) = s.representative;
             let measured = btf.image(usize::from(v), usize::from(l)).unwrap();
-            let synth = model.synthesize_subspace(k, &o).unwrap();
-            Colour::of(&synth, &measured)
+            compare(&model.synthesize_subspace(k, &o).unwrap(), &measured)
         })
         .collect()
+}
+
+/// The colour figures of every subspace image of `model` against its representative.
+fn subspace_colours(btf: &Btf, model: &MaterialModel) -> Vec<Colour> {
+    per_subspace(btf, model, Colour::of)
 }
 
 /// Whole relit images of `model` (seed 7, measured size) against the measured images of the
@@ -399,22 +407,7 @@ fn grey_clay_has_no_coloured_specks() {
         ..AnalysisOptions::default()
     };
     let model = analyze(&btf, &options, &NoProgress).unwrap().0;
-    let o = SynthesisOptions {
-        rows: btf.height() as usize,
-        cols: btf.width() as usize,
-        seed: 7,
-        tileable: false,
-    };
-    let fractions: Vec<f64> = model
-        .subspaces
-        .iter()
-        .enumerate()
-        .map(|(k, s)| {
-            let (v, l) = s.representative;
-            let measured = btf.image(usize::from(v), usize::from(l)).unwrap();
-            speck_fraction(&model.synthesize_subspace(k, &o).unwrap(), &measured)
-        })
-        .collect();
+    let fractions: Vec<f64> = per_subspace(&btf, &model, speck_fraction);
     println!("speck fractions: {fractions:.4?}");
     let worst = fractions.iter().fold(0.0f64, |m, &f| m.max(f));
     assert!(worst < SPECK_LIMIT, "{fractions:.4?}");
