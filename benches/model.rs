@@ -5,6 +5,9 @@
 //! Run: `cargo bench --bench model` (medians in target/criterion/). Targets from the MRF issue:
 //! analysis under 10 s, one 1024^2 image in 25 ms, all 20 subspaces at 1024^2 under 1 s.
 
+#[path = "../crates/cli/src/allocator.rs"]
+mod allocator;
+
 use std::hint::black_box;
 use std::time::Duration;
 
@@ -17,12 +20,13 @@ use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
-/// The allocator of the `btfmrf` binary (src/main.rs), so that these figures are the binary's.
+/// The allocator of the `btfmrf` binary (crates/cli/src/main.rs), so that these figures are the
+/// binary's.
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn fitted(kind: ModelKind) -> MaterialModel {
-    btfmrf::allocator::keep_freed_memory();
+    allocator::keep_freed_memory();
     let btf = Btf::synthetic(SyntheticMaterial::Sponge, 128, 1).expect("valid size");
     let options = AnalysisOptions {
         kind,

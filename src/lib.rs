@@ -3,8 +3,10 @@
 //! Measured BTFs (bidirectional texture functions: one image per view/light pair, thousands of
 //! them) in, compact Markov-random-field models out, and seamless synthesis of any size back.
 //!
-//! This crate is the library; the `btfmrf` binary is a thin command-line shell over it.
-//! The data flows one way: source -> [`btf::Btf`] -> analysis -> model -> synthesis -> render.
+//! This crate is the core library, free of UI and GPU dependencies. The renderer is the
+//! `btfmrf-render` crate (crates/render) and the `btfmrf` binary a thin command-line shell
+//! over both (crates/cli). The data flows one way: source -> [`btf::Btf`] -> analysis -> model
+//! -> synthesis -> render.
 //!
 //! ## Conventions
 //!
@@ -30,7 +32,6 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
-pub mod allocator;
 pub mod analysis;
 pub mod btf;
 pub mod color;
@@ -44,5 +45,4 @@ pub mod memory;
 pub mod model;
 pub mod mrf;
 pub mod progress;
-pub mod render;
 pub mod synthesis;

@@ -2,7 +2,7 @@
 //! they are given, checked before any work starts so that a request the machine cannot hold is
 //! refused with a size that fits instead of being killed half-way.
 //!
-//! The constants are measured peaks (resident set, `tests/limits.rs` checks each estimate
+//! The constants are measured peaks (resident set, `crates/cli/tests/limits.rs` checks each estimate
 //! against a spawned command's measured peak) rounded up: an estimate errs on the large side.
 
 /// Everything that is not proportional to the sizes: the binary, thread stacks, the allocator's

@@ -258,7 +258,7 @@ impl<'a> IntoIterator for &'a DirectionSet {
 }
 
 /// Azimuthal-equidistant projection: polar angle becomes radius.
-pub(crate) fn project(d: &Direction) -> [f64; 2] {
+pub fn project(d: &Direction) -> [f64; 2] {
     let r = d.theta_deg.to_radians();
     let (s, c) = d.phi_deg.to_radians().sin_cos();
     [r * c, r * s]
@@ -282,7 +282,7 @@ fn triangulate(points: &[[f64; 2]]) -> Vec<[usize; 3]> {
 
 /// The point of triangle (a, b, c) closest to `p`, and its barycentric coordinates
 /// (Ericson, Real-Time Collision Detection, sec. 5.1.5, in 2D).
-pub(crate) fn closest_point_in_triangle(
+pub fn closest_point_in_triangle(
     p: [f64; 2],
     a: [f64; 2],
     b: [f64; 2],

@@ -1,47 +1,14 @@
-//! Helpers shared by the integration tests: running the real binary, temporary folders, and
-//! small BTF archives that tests can then damage on purpose.
+//! Helpers shared by the integration tests of the library and of the CLI (which includes this
+//! file): temporary folders, small BTF archives that tests can then damage on purpose, and the
+//! repository's own files.
 #![allow(dead_code)] // each test binary uses a different subset
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, ImageFormat, io};
 use btfmrf::progress::NoProgress;
-
-/// The real `btfmrf` binary built for these tests.
-pub fn btfmrf(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_btfmrf"))
-        .args(args)
-        .output()
-        .expect("the btfmrf binary runs")
-}
-
-/// Stdout of a run that must succeed.
-pub fn ok(args: &[&str]) -> String {
-    let out = btfmrf(args);
-    assert!(
-        out.status.success(),
-        "btfmrf {args:?} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).expect("utf-8 output")
-}
-
-/// Stderr of a run that must fail cleanly: non-zero exit, one `error:` line, no panic.
-pub fn fails(args: &[&str]) -> String {
-    let out = btfmrf(args);
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "btfmrf {args:?} should fail");
-    assert!(
-        !stderr.contains("panicked"),
-        "btfmrf {args:?} panicked:\n{stderr}"
-    );
-    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(errors.len(), 1, "expected one error line, got:\n{stderr}");
-    errors[0].to_string()
-}
 
 /// A fresh temporary folder, removed when dropped.
 pub fn temp() -> tempfile::TempDir {
@@ -93,4 +60,25 @@ pub fn entries(dir: &Path) -> Vec<String> {
         .collect();
     v.sort();
     v
+}
+
+/// The repository root (the library crate's folder): golden files, models, `../shared`.
+pub fn repo() -> PathBuf {
+    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
+    // This file is compiled into the library's tests and the CLI crate's (crates/cli) tests.
+    if here.join("crates").is_dir() {
+        here.to_path_buf()
+    } else {
+        here.join("../..")
+    }
+}
+
+/// A real RTI capture in `../shared/data/rti` (beside the repository), as a path string.
+pub fn rti(set: &str) -> String {
+    repo()
+        .join("../shared/data/rti")
+        .join(set)
+        .to_str()
+        .expect("utf-8 path")
+        .to_string()
 }

@@ -5,7 +5,7 @@
 //! cluster mean and `C` eigen-ABRDF values, RGB. The fragment shader (`shaders/lpca.wgsl`)
 //! picks the texel nearest to the fragment's texture coordinates (the measured tile repeats)
 //! and rebuilds its 3 x 3 nearest measured pairs exactly like
-//! [`LpcaModel::reconstruct`](crate::lpca::LpcaModel::reconstruct), blending them with the
+//! [`LpcaModel::reconstruct`](btfmrf::lpca::LpcaModel::reconstruct), blending them with the
 //! barycentric weights of the direction tables ([`super::lut`]) that the MRF pipelines use.
 //!
 //! PCA RF models (one factorization per view, one cluster each) fit the same layout with the
@@ -17,7 +17,7 @@ use super::lut::DirectionLut;
 use super::pipeline::{Globals, GpuMesh, Pipelines};
 use super::scene::Scene;
 use super::{GpuContext, RenderError, Result};
-use crate::lpca::{LpcaModel, Method};
+use btfmrf::lpca::{LpcaModel, Method};
 
 /// The CPU side of [`GpuLpca`]: what it uploads.
 #[derive(Debug, Clone)]

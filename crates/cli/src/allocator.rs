@@ -26,16 +26,3 @@ pub fn keep_freed_memory() -> bool {
     }
     true
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_purge_delay_option_is_found_and_set() {
-        // The first call finds mimalloc's default at the index and sets it; after that the
-        // option no longer holds the default.
-        assert!(keep_freed_memory());
-        assert!(!keep_freed_memory());
-    }
-}

@@ -240,9 +240,7 @@ fn the_binary_reads_hostile_files_within_one_gib_of_address_space() {
         )],
     );
     std::fs::write(d("hollow.lpca"), hollow_lpca(16384)).unwrap();
-    let mut flagged =
-        std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sponge64.btfm"))
-            .unwrap();
+    let mut flagged = std::fs::read(common::repo().join("tests/golden/sponge64.btfm")).unwrap();
     flagged[6] = 2;
     std::fs::write(d("flagged.btfm"), flagged).unwrap();
     let p = |name: &str| s(&d(name)).to_string();
@@ -392,7 +390,7 @@ fn check_estimate(what: &str, estimate: u64, measured: u64) {
 #[test]
 fn estimates_bound_the_measured_peaks() {
     let dir = temp();
-    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sponge64.btfm");
+    let model = common::repo().join("tests/golden/sponge64.btfm");
     let m = btfmrf::model::format::read(&model).unwrap();
     let out = dir.path().join("x.png");
     let (view, light) = (
@@ -506,7 +504,7 @@ fn estimates_bound_the_measured_peaks() {
 #[test]
 fn requests_over_the_budget_are_refused_with_a_size_that_fits() {
     let dir = temp();
-    let model: PathBuf = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sponge64.btfm");
+    let model: PathBuf = common::repo().join("tests/golden/sponge64.btfm");
     let out = dir.path().join("x.png");
     let args = |size: &str| {
         vec![
@@ -648,7 +646,7 @@ fn envelope(magic: &[u8; 4], payload: &[u8]) -> Vec<u8> {
 
 /// The targets of `fuzz/fuzz_targets/`, run in this process, and their seeds.
 fn targets(scratch: &Path) -> Vec<(&'static str, Target, Vec<Vec<u8>>)> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = common::repo();
     let seeds = |name: &str| -> Vec<Vec<u8>> {
         let mut v: Vec<Vec<u8>> = std::fs::read_dir(root.join("fuzz/seeds").join(name))
             .map(|d| {
@@ -761,7 +759,7 @@ fn mutation_fuzz() {
         .unwrap_or(60);
     let only = std::env::var("FUZZ_TARGET").ok();
     let scratch = temp();
-    let findings_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/fuzz-findings");
+    let findings_dir = common::repo().join("target/fuzz-findings");
     let mut findings = 0;
     std::panic::set_hook(Box::new(|_| {})); // panics are counted, not printed
     for (name, target, seeds) in targets(scratch.path()) {

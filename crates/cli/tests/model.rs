@@ -240,7 +240,7 @@ fn real_rti_sets_analyze_and_synthesize() {
         ("clay-leaf", ModelKind::Car2d),
         ("loewenkopf", ModelKind::Car3d),
     ] {
-        let btf = Btf::open(format!("../shared/data/rti/{set}")).unwrap();
+        let btf = Btf::open(rti(set)).unwrap();
         let options = AnalysisOptions {
             kind,
             clusters: 8,

@@ -12,7 +12,7 @@ use std::collections::BTreeSet;
 use super::lut::DirectionLut;
 use super::mesh::Mesh;
 use super::scene::Scene;
-use crate::model::MaterialModel;
+use btfmrf::model::MaterialModel;
 
 /// What to synthesize for one scene.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -157,8 +157,8 @@ pub fn plan_scene(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::btf::{Direction, DirectionSet};
-    use crate::render::scene::{Camera, Light, Projection};
+    use crate::scene::{Camera, Light, Projection};
+    use btfmrf::btf::{Direction, DirectionSet};
 
     /// A model skeleton whose cluster of a pair is `light index % 4` (no band models: the
     /// plan reads only the directions and the cluster table).
@@ -166,7 +166,7 @@ mod tests {
         let (views, lights) = (DirectionSet::bonn(), DirectionSet::bonn());
         let cluster_table = (0..81 * 81).map(|i| (i % 81 % 4) as u16).collect();
         MaterialModel {
-            kind: crate::model::ModelKind::Car2d,
+            kind: btfmrf::model::ModelKind::Car2d,
             views,
             lights,
             width: 64,

@@ -1,12 +1,12 @@
-//! The wgpu renderer: a [`MaterialModel`](crate::model::MaterialModel) on a mesh, by bump or
+//! The wgpu renderer: a [`MaterialModel`](btfmrf::model::MaterialModel) on a mesh, by bump or
 //! displacement mapping (seed 001, sec. 5.3), headless to an image or in a window.
 //!
 //! Per fragment, the view and light directions are taken into the surface's tangent frame, each
 //! is interpolated from its 3 nearest measured directions (barycentric weights, exactly as
-//! [`DirectionSet::interpolate`](crate::btf::DirectionSet::interpolate) does on the CPU), and
+//! [`DirectionSet::interpolate`](btfmrf::btf::DirectionSet::interpolate) does on the CPU), and
 //! the 9 (view, light) pairs pick their clusters' synthesized subspace images from a tileable
 //! texture array. The blend is relit by the range map's normals like
-//! [`bump_relight`](crate::synthesis::bump_relight): `max(0, n . l) / mean(max(0, n . l))`.
+//! [`bump_relight`](btfmrf::synthesis::bump_relight): `max(0, n . l) / mean(max(0, n . l))`.
 //! Displacement mapping also moves the vertices of a finely tessellated mesh along the normal
 //! by the range map.
 //!
@@ -14,7 +14,7 @@
 //! visible surface touches and the texture resolution of its screen footprint, and only those
 //! subspace images are synthesized.
 //!
-//! An LPCA model ([`crate::lpca::LpcaModel`], Müller et al. 2003) renders through its own
+//! An LPCA model ([`btfmrf::lpca::LpcaModel`], Müller et al. 2003) renders through its own
 //! pipeline, [`Mapping::Lpca`] ([`lpca`]): every fragment decodes its texel's 3 x 3 nearest
 //! measured (view, light) pairs from the cluster's eigen-ABRDFs and the texel's weights,
 //! with the same direction tables, so nothing is synthesized.
@@ -41,7 +41,7 @@ pub use headless::{RenderOutput, Renderer};
 pub use mesh::{Mesh, MeshKind};
 pub use scene::{Camera, Light, Scene};
 
-use crate::model::ModelError;
+use btfmrf::model::ModelError;
 
 /// Result alias for the render area.
 pub type Result<T, E = RenderError> = std::result::Result<T, E>;
@@ -82,7 +82,7 @@ pub enum RenderError {
     },
     /// An LPCA model could not be read or is not one this renderer decodes.
     #[error(transparent)]
-    Lpca(#[from] crate::lpca::LpcaError),
+    Lpca(#[from] btfmrf::lpca::LpcaError),
     /// The model and the requested pipeline do not go together.
     #[error("{0}")]
     Unsupported(String),
@@ -110,7 +110,7 @@ pub enum Mapping {
     /// One subspace image as a plain texture, no view or light dependence: the baseline cost
     /// of texturing the same mesh (benchmarks).
     Plain,
-    /// An LPCA model ([`crate::lpca::LpcaModel`]) decoded per fragment: cluster mean plus
+    /// An LPCA model ([`btfmrf::lpca::LpcaModel`]) decoded per fragment: cluster mean plus
     /// weighted eigen-ABRDFs of the 3 x 3 nearest measured (view, light) pairs.
     Lpca,
 }

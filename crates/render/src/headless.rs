@@ -11,9 +11,9 @@ use super::pipeline::{DEPTH_FORMAT, GpuMaterial, GpuMesh, MaterialTables, Pipeli
 use super::plan::{ScenePlan, plan_scene};
 use super::scene::Scene;
 use super::{GpuContext, MAX_RENDER_SIDE, Mapping, RenderError, Result};
-use crate::lpca::LpcaModel;
-use crate::model::MaterialModel;
-use crate::synthesis::{SynthesisCache, SynthesisOptions};
+use btfmrf::lpca::LpcaModel;
+use btfmrf::model::MaterialModel;
+use btfmrf::synthesis::{SynthesisCache, SynthesisOptions};
 use rayon::prelude::*;
 
 /// The coarsest texture side the footprint may choose, texels.

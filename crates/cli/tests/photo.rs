@@ -11,7 +11,7 @@ use btfmrf::eval::Yardstick;
 use common::{fails, ok, s, temp};
 
 fn gravel() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/textures/gravel.png")
+    common::repo().join("../shared/data/textures/gravel.png")
 }
 
 #[test]

@@ -2,7 +2,7 @@
 //!
 //! World space has y up. Texture coordinates follow the image convention (u along columns,
 //! v along rows, v = 0 on the top row), and the tangent frame follows the BTF convention of
-//! [`crate::btf::directions`]: x = tangent (direction of increasing u), y = bitangent (image
+//! [`btfmrf::btf::directions`]: x = tangent (direction of increasing u), y = bitangent (image
 //! up, the direction of *decreasing* v), z = normal. The bitangent is
 //! `tangent.w * cross(normal, tangent)`, so mirrored texture mappings work too.
 

@@ -279,7 +279,7 @@ fn existing_output_folder_is_not_overwritten() {
 
 /// A small committed model (its pyramid has more than one level).
 fn golden_model() -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sponge64.btfm")
+    common::repo().join("tests/golden/sponge64.btfm")
 }
 
 /// A zip of `members` written with deflate (so that long runs of zeros stay small).
@@ -367,7 +367,7 @@ fn lpca_file(side: u32, tail: &[u8]) -> Vec<u8> {
 }
 
 /// Defect 2: a small `.lpca` claiming a 16384^2 model; the weights are checked before anything
-/// of that size is allocated. (`tests/limits.rs` measures the allocation itself.)
+/// of that size is allocated. (`crates/cli/tests/limits.rs` measures the allocation itself.)
 #[test]
 fn lpca_claiming_a_huge_model_is_refused() {
     // One cluster: 3 means, 3 eigenvector values, then weights that are not there.
@@ -653,7 +653,7 @@ fn synthesize_output_extensions() {
 fn unknown_model_flags_are_refused() {
     let good = std::fs::read(golden_model()).unwrap();
     assert!(btfmrf::model::format::from_bytes(&good, Path::new("g.btfm")).is_ok());
-    for models in std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("models")).unwrap() {
+    for models in std::fs::read_dir(common::repo().join("models")).unwrap() {
         let p = models.unwrap().path();
         if p.extension().is_some_and(|e| e == "btfm") {
             btfmrf::model::format::read(&p).unwrap();

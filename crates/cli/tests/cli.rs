@@ -114,7 +114,7 @@ fn generate_exports_the_ground_truth() {
 #[test]
 fn info_reads_the_real_rti_sets() {
     for (set, lights, w, h) in [("clay-leaf", 48, 310, 310), ("loewenkopf", 240, 64, 43)] {
-        let path = format!("../shared/data/rti/{set}");
+        let path = rti(set);
         let info: serde_json::Value =
             serde_json::from_str(&ok(&["info", &path, "--json"])).unwrap();
         assert_eq!(info["views"], 1, "{set}");
@@ -124,7 +124,7 @@ fn info_reads_the_real_rti_sets() {
             (w.into(), h.into())
         );
     }
-    let human = ok(&["info", "../shared/data/rti/clay-leaf"]);
+    let human = ok(&["info", &rti("clay-leaf")]);
     assert!(human.contains("lights: 48"), "{human}");
 }
 
@@ -157,7 +157,7 @@ fn convert_between_zip_folder_exr_and_png() {
     // The RTI set's light angles are not whole degrees: the UBO2003 names cannot hold them.
     let err = fails(&[
         "convert",
-        "../shared/data/rti/clay-leaf",
+        &rti("clay-leaf"),
         "--out",
         s(&dir.path().join("r.zip")),
     ]);
@@ -202,7 +202,7 @@ fn analyze_warns_when_the_input_is_not_a_stationary_texture() {
         let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         (String::from_utf8_lossy(&out.stderr).into_owned(), report)
     };
-    let (stderr, report) = run("../shared/data/rti/loewenkopf", "lion.btfm");
+    let (stderr, report) = run(&rti("loewenkopf"), "lion.btfm");
     assert!(
         stderr.contains("warning: the input does not look like a stationary texture"),
         "{stderr}"

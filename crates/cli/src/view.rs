@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use btfmrf::btf::Direction;
 use btfmrf::model::format;
-use btfmrf::render::viewer::{ViewerOptions, run_viewer};
-use btfmrf::render::{Mapping, MeshKind};
+use btfmrf_render::viewer::{ViewerOptions, run_viewer};
+use btfmrf_render::{Mapping, MeshKind};
 
 use super::Global;
 use super::synthesize::{parse_direction, parse_size};
@@ -58,7 +58,7 @@ pub struct Args {
 
 pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
     let (rows, cols) = args.size;
-    btfmrf::render::headless::check_size(u32::try_from(cols)?, u32::try_from(rows)?)?;
+    btfmrf_render::headless::check_size(u32::try_from(cols)?, u32::try_from(rows)?)?;
     let n = args.texture_size;
     if !n.is_power_of_two() || !(32..=4096).contains(&n) {
         anyhow::bail!("invalid --texture-size {n}: a power of two within 32..=4096");

@@ -22,9 +22,9 @@ use super::mesh::MeshKind;
 use super::pipeline::{DEPTH_FORMAT, GpuMaterial, GpuMesh, MaterialTables, Pipelines};
 use super::scene::{Camera, Light, Scene};
 use super::{GpuContext, Mapping, RenderError, Result};
-use crate::btf::Direction;
-use crate::model::MaterialModel;
-use crate::synthesis::SynthesisOptions;
+use btfmrf::btf::Direction;
+use btfmrf::model::MaterialModel;
+use btfmrf::synthesis::SynthesisOptions;
 
 /// Options of [`run_viewer`].
 #[derive(Debug, Clone)]

@@ -7,8 +7,8 @@ use btfmrf::btf::{Direction, io};
 use btfmrf::lpca;
 use btfmrf::memory;
 use btfmrf::model::format;
-use btfmrf::render::headless::ModelRenderOptions;
-use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
+use btfmrf_render::headless::ModelRenderOptions;
+use btfmrf_render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
 
 use super::synthesize::{parse_direction, parse_size};
 use super::{Global, emit};
@@ -76,7 +76,7 @@ pub struct Args {
     /// Measured texels per texture repetition (a power of two): the material's physical
     /// scale on the mesh, and the side at which subspace images and range map are
     /// synthesized.
-    #[arg(long, value_name = "TEXELS", default_value_t = btfmrf::render::headless::DEFAULT_TILE)]
+    #[arg(long, value_name = "TEXELS", default_value_t = btfmrf_render::headless::DEFAULT_TILE)]
     tile: usize,
     /// Texture repetitions per unit length of the built-in meshes.
     #[arg(long, default_value_t = 1.0)]
@@ -95,7 +95,7 @@ pub struct Args {
 pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let (rows, cols) = args.size;
     let (width, height) = (u32::try_from(cols)?, u32::try_from(rows)?);
-    btfmrf::render::headless::check_size(width, height)?;
+    btfmrf_render::headless::check_size(width, height)?;
     if !(args.distance.is_finite() && args.distance > 0.0) {
         anyhow::bail!("invalid --distance {}: must be positive", args.distance);
     }
@@ -112,11 +112,11 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         );
     }
     if let Some(n) = args.texture_size
-        && (!n.is_power_of_two() || n > btfmrf::render::MAX_RENDER_SIDE as usize)
+        && (!n.is_power_of_two() || n > btfmrf_render::MAX_RENDER_SIDE as usize)
     {
         anyhow::bail!(
             "invalid --texture-size {n}: a power of two within 1..={}",
-            btfmrf::render::MAX_RENDER_SIDE
+            btfmrf_render::MAX_RENDER_SIDE
         );
     }
     let is_lpca = {

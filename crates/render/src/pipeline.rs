@@ -17,21 +17,21 @@ use super::lut::{DirectionLut, MeanShading};
 use super::mesh::{Mesh, Vertex};
 use super::scene::Scene;
 use super::{GpuContext, Mapping, RenderError, Result};
-use crate::model::MaterialModel;
-use crate::synthesis::SynthesisCache;
+use btfmrf::model::MaterialModel;
+use btfmrf::synthesis::SynthesisCache;
 
 /// The depth buffer format of every pipeline.
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
-const COMMON: &str = include_str!("../../shaders/common.wgsl");
+const COMMON: &str = include_str!("../../../shaders/common.wgsl");
 
 /// The WGSL source of a pipeline: `common.wgsl` followed by the pipeline's own file.
 pub fn shader_source(mapping: Mapping) -> String {
     let own = match mapping {
-        Mapping::Bump => include_str!("../../shaders/bump.wgsl"),
-        Mapping::Displacement => include_str!("../../shaders/displacement.wgsl"),
-        Mapping::Plain => include_str!("../../shaders/plain.wgsl"),
-        Mapping::Lpca => include_str!("../../shaders/lpca.wgsl"),
+        Mapping::Bump => include_str!("../../../shaders/bump.wgsl"),
+        Mapping::Displacement => include_str!("../../../shaders/displacement.wgsl"),
+        Mapping::Plain => include_str!("../../../shaders/plain.wgsl"),
+        Mapping::Lpca => include_str!("../../../shaders/lpca.wgsl"),
     };
     format!("{COMMON}\n{own}")
 }

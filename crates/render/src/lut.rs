@@ -10,15 +10,15 @@
 //! triangles is the CPU's (everywhere for the Bonn sampling, whose triangles are much larger
 //! than a cell), not quantised to the grid.
 //!
-//! **Mean shading.** [`bump_relight`](crate::synthesis::bump_relight) divides by the mean of
+//! **Mean shading.** [`bump_relight`](btfmrf::synthesis::bump_relight) divides by the mean of
 //! `max(0, n . l)` over the texture; [`MeanShading`] tabulates it on a grid of light
 //! directions (bilinear in between).
 
 use ndarray::Array3;
 use rayon::prelude::*;
 
-use crate::btf::directions::{closest_point_in_triangle, project};
-use crate::btf::{Direction, DirectionSet};
+use btfmrf::btf::directions::{closest_point_in_triangle, project};
+use btfmrf::btf::{Direction, DirectionSet};
 
 use super::Result;
 
@@ -69,8 +69,8 @@ impl DirectionLut {
                 let w = set.interpolate(&d)?;
                 Ok([w[0].index as u32, w[1].index as u32, w[2].index as u32, 0])
             })
-            .collect::<Result<Vec<_>, crate::btf::BtfError>>()
-            .map_err(crate::model::ModelError::from)?;
+            .collect::<Result<Vec<_>, btfmrf::btf::BtfError>>()
+            .map_err(btfmrf::model::ModelError::from)?;
         Ok(Self { points, cells })
     }
 

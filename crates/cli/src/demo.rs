@@ -12,8 +12,8 @@ use btfmrf::eval::montage::montage;
 use btfmrf::lpca::{LpcaModel, Method};
 use btfmrf::memory;
 use btfmrf::model::{MaterialModel, ModelKind, format};
-use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
 use btfmrf::synthesis::SynthesisOptions;
+use btfmrf_render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
 use ndarray::Array3;
 
 use super::{Bar, Global, emit};

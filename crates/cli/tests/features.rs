@@ -18,7 +18,7 @@ use rand_pcg::Pcg64Mcg;
 const PHOTOS: [&str; 3] = ["brick", "grass", "gravel"];
 
 fn photo(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("../shared/data/textures/{name}.png"))
+    common::repo().join(format!("../shared/data/textures/{name}.png"))
 }
 
 fn top_half(image: &Array3<f32>) -> Array3<f32> {
@@ -155,7 +155,7 @@ fn the_features_command_reads_btfs_and_refuses_bad_input_by_name() {
 
 #[test]
 fn the_recognition_experiment_shows_the_invariant_features_beating_colour_histograms() {
-    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    let data = common::repo().join("../shared/data");
     let out = ok(&[
         "recognize",
         "--data",

@@ -1,9 +1,9 @@
 //! The renderer: shaders validated by naga, GPU against the CPU reference on a flat plane,
 //! golden images, determinism, and the `render` command's reports and errors.
 //!
-//! Tests that need a GPU adapter skip with a message when none exists; `scripts/setup`
-//! installs Mesa's software Vulkan driver (lavapipe), so on this project's machines and in CI
-//! they run.
+//! Tests that need a GPU adapter skip with a message when none exists, and fail when `CI` is
+//! set; `scripts/setup` installs Mesa's software Vulkan driver (lavapipe), so on this project's
+//! machines and in CI they run.
 
 mod common;
 
@@ -14,29 +14,30 @@ use btfmrf::btf::{Btf, Direction, io};
 use btfmrf::lpca::{self, LpcaModel, LpcaOptions, Method};
 use btfmrf::model::{MaterialModel, format};
 use btfmrf::progress::NoProgress;
-use btfmrf::render::headless::ModelRenderOptions;
-use btfmrf::render::pipeline::shader_source;
-use btfmrf::render::scene::Projection;
-use btfmrf::render::{Camera, Light, Mapping, Mesh, MeshKind, RenderError, Renderer, Scene};
 use btfmrf::synthesis::SynthesisOptions;
+use btfmrf_render::headless::ModelRenderOptions;
+use btfmrf_render::pipeline::shader_source;
+use btfmrf_render::scene::Projection;
+use btfmrf_render::{Camera, Light, Mapping, Mesh, MeshKind, RenderError, Renderer, Scene};
 use ndarray::Array3;
 
 /// A small 2D CAR model of the sponge (64 x 64, 8 clusters, with a range map), kept in the
 /// repository so that the golden images depend on synthesis and rendering only.
 fn golden_model_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sponge64.btfm")
+    common::repo().join("tests/golden/sponge64.btfm")
 }
 
 fn golden_model() -> MaterialModel {
     format::read(&golden_model_path()).expect("tests/golden/sponge64.btfm reads")
 }
 
-/// The renderer, or `None` (with a message) when this machine has no GPU adapter at all.
+/// The renderer, or `None` (with a message; a failure when `CI` is set) when this machine has
+/// no GPU adapter at all.
 fn renderer() -> Option<Renderer> {
     match Renderer::new() {
         Ok(r) => Some(r),
         Err(RenderError::NoAdapter(e)) => {
-            eprintln!("skipping: no GPU adapter ({e}); run scripts/setup to install lavapipe");
+            common::skip_unless_ci(&format!("no GPU adapter ({e}); lavapipe is missing"));
             None
         }
         Err(e) => panic!("renderer: {e}"),
@@ -179,7 +180,7 @@ fn golden_scene(light: Direction) -> Scene {
 /// and at most 1% of the channel values more than 24 levels apart (software rasterisers
 /// differ slightly at triangle edges). `BTFMRF_BLESS=1` rewrites the golden image.
 fn check_golden(name: &str, image: &Array3<f32>) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("tests/golden/{name}.png"));
+    let path = common::repo().join(format!("tests/golden/{name}.png"));
     if std::env::var_os("BTFMRF_BLESS").is_some() {
         io::write_image(&path, image).unwrap();
         eprintln!("blessed {}", path.display());

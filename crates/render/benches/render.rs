@@ -8,9 +8,9 @@ use std::path::Path;
 
 use btfmrf::btf::Direction;
 use btfmrf::model::format;
-use btfmrf::render::pipeline::{GpuMaterial, GpuMesh, MaterialTables};
-use btfmrf::render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
 use btfmrf::synthesis::SynthesisOptions;
+use btfmrf_render::pipeline::{GpuMaterial, GpuMesh, MaterialTables};
+use btfmrf_render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
 use criterion::{Criterion, criterion_group, criterion_main};
 
 fn frames(c: &mut Criterion) {
@@ -22,9 +22,10 @@ fn frames(c: &mut Criterion) {
         }
     };
     eprintln!("adapter: {}", renderer.ctx.describe());
-    let model =
-        format::read(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sponge64.btfm"))
-            .expect("the golden model");
+    let model = format::read(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/golden/sponge64.btfm"),
+    )
+    .expect("the golden model");
     let n = 512;
     let all: Vec<usize> = (0..model.subspaces.len()).collect();
     let cache = model

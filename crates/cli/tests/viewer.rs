@@ -1,6 +1,8 @@
 //! The interactive viewer, under a virtual X server: `btfmrf view --frames N --screenshot`
 //! must open a window, render and save non-trivial window contents. Skips with a message when
-//! `Xvfb` is not installed (`scripts/setup` installs it).
+//! `Xvfb` is not installed (`scripts/setup` installs it), and fails when `CI` is set.
+
+mod common;
 
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -25,7 +27,7 @@ fn start_xvfb() -> Option<Xvfb> {
         .output()
         .is_ok_and(|o| o.status.success());
     if !found {
-        eprintln!("skipping: Xvfb is not installed (scripts/setup installs the xvfb package)");
+        common::skip_unless_ci("Xvfb is not installed");
         return None;
     }
     let base = 100 + std::process::id() % 400;
@@ -73,7 +75,7 @@ fn the_viewer_renders_frames_and_saves_a_screenshot_under_xvfb() {
         use std::os::unix::fs::PermissionsExt;
         std::fs::set_permissions(&runtime, std::fs::Permissions::from_mode(0o700)).unwrap();
     }
-    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sponge64.btfm");
+    let model = common::repo().join("tests/golden/sponge64.btfm");
     let out = Command::new(env!("CARGO_BIN_EXE_btfmrf"))
         .args([
             "view",
@@ -108,7 +110,7 @@ fn the_viewer_renders_frames_and_saves_a_screenshot_under_xvfb() {
 
 #[test]
 fn the_viewer_without_a_display_fails_cleanly() {
-    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sponge64.btfm");
+    let model = common::repo().join("tests/golden/sponge64.btfm");
     let out = Command::new(env!("CARGO_BIN_EXE_btfmrf"))
         .args(["view", model.to_str().unwrap(), "--frames", "1"])
         .env_remove("DISPLAY")

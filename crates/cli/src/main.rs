@@ -1,4 +1,8 @@
-//! Argument parsing (clap derive), one file per subcommand, and the terminal progress bar.
+//! The `btfmrf` command line: a thin shell over the `btfmrf` library and the
+//! `btfmrf-render` renderer. Argument parsing (clap derive), one file per subcommand, and the
+//! terminal progress bar.
+
+mod allocator;
 
 mod analyze;
 mod bench;
@@ -14,6 +18,7 @@ mod synthesize;
 mod view;
 
 use std::io::IsTerminal;
+use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -260,6 +265,36 @@ pub fn human_bytes(bytes: u64) -> String {
     }
 }
 
+/// mimalloc keeps freed pages for reuse. Synthesis allocates and frees many large planes, and
+/// the system allocator handed them back to the kernel each time: page faults were a quarter of
+/// a 1024 x 1024 synthesis (docs/BENCHMARKS.md). [`allocator::keep_freed_memory`]
+/// keeps them for good.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
+fn main() -> ExitCode {
+    allocator::keep_freed_memory();
+    on_interrupt_remove_temporaries();
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", error_line(&e));
+            exit_code(&e)
+        }
+    }
+}
+
+/// SIGINT, SIGTERM or SIGHUP: delete the half-written outputs (`.btfmrf-partial-*`), say so on
+/// one error line, and exit with status 130 (the shell's code for an interrupted command).
+fn on_interrupt_remove_temporaries() {
+    // Without a handler the default action (exit, leaving temporaries) still applies.
+    let _ = ctrlc::set_handler(|| {
+        let removed = btfmrf::btf::io::partial::remove_registered();
+        eprintln!("error: interrupted; removed {removed} partial output(s)");
+        std::process::exit(130);
+    });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -276,5 +311,13 @@ mod tests {
         let line = error_line(&e);
         assert_eq!(line, "reading: bad member 'x\\n\\u{1b}[31merror: forged'");
         assert!(!line.contains('\n') && !line.contains('\u{1b}'));
+    }
+
+    #[test]
+    fn the_allocator_purge_delay_option_is_found_and_set() {
+        // The first call finds mimalloc's default at the index and sets it; after that the
+        // option no longer holds the default.
+        assert!(allocator::keep_freed_memory());
+        assert!(!allocator::keep_freed_memory());
     }
 }

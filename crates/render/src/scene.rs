@@ -7,7 +7,7 @@
 
 use nalgebra::{Matrix4, Point3, Vector3};
 
-use crate::btf::Direction;
+use btfmrf::btf::Direction;
 
 /// The world unit vector of a direction (see the module documentation).
 pub fn world_direction(d: &Direction) -> [f32; 3] {
