@@ -26,9 +26,12 @@ pub struct Direction {
 impl Direction {
     /// A direction from angles in degrees; phi is wrapped into [0, 360).
     pub fn new(theta_deg: f64, phi_deg: f64) -> Self {
+        // `rem_euclid` of a tiny negative angle rounds to exactly 360 (fuzzing found a model
+        // file whose azimuth read back as 360 and was then written as 0).
+        let phi = phi_deg.rem_euclid(360.0);
         Self {
             theta_deg,
-            phi_deg: phi_deg.rem_euclid(360.0),
+            phi_deg: if phi >= 360.0 { 0.0 } else { phi },
         }
     }
 
@@ -338,6 +341,21 @@ pub fn closest_point_in_triangle(
 mod tests {
     use super::*;
     use approx::assert_abs_diff_eq;
+
+    #[test]
+    fn azimuths_wrap_into_0_to_360_exclusive() {
+        for (phi, wrapped) in [
+            (-1e-30, 0.0),
+            (-5.6e-39, 0.0),
+            (360.0, 0.0),
+            (-90.0, 270.0),
+            (725.0, 5.0),
+        ] {
+            let d = Direction::new(10.0, phi);
+            assert_eq!(d.phi_deg, wrapped, "{phi}");
+            assert!((0.0..360.0).contains(&d.phi_deg));
+        }
+    }
 
     #[test]
     fn bonn_sampling_has_81_whole_degree_directions() {

@@ -691,9 +691,18 @@ fn targets(scratch: &Path) -> Vec<(&'static str, Target, Vec<Vec<u8>>)> {
         (
             "btfm_payload",
             Box::new(|d: &[u8]| {
-                let _ = btfmrf::model::format::from_bytes(&envelope(b"BTFM", d), Path::new("f"));
+                let file = envelope(b"BTFM", d);
+                if let Ok(m) = btfmrf::model::format::from_bytes(&file, Path::new("f")) {
+                    let bytes = btfmrf::model::format::to_bytes(&m);
+                    let again = btfmrf::model::format::from_bytes(&bytes, Path::new("f")).unwrap();
+                    assert_eq!(btfmrf::model::format::to_bytes(&again), bytes);
+                }
             }),
-            vec![model[12..model.len() - 4].to_vec()],
+            [
+                vec![model[12..model.len() - 4].to_vec()],
+                seeds("btfm_payload"),
+            ]
+            .concat(),
         ),
         (
             "lpca",
