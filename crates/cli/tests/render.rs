@@ -16,7 +16,6 @@ use btfmrf::model::{MaterialModel, format};
 use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
 use btfmrf_render::headless::ModelRenderOptions;
-use btfmrf_render::pipeline::shader_source;
 use btfmrf_render::scene::Projection;
 use btfmrf_render::{Camera, Light, Mapping, Mesh, MeshKind, RenderError, Renderer, Scene};
 use ndarray::Array3;
@@ -64,8 +63,7 @@ fn write_diff(name: &str, a: &Array3<f32>, b: &Array3<f32>) -> PathBuf {
 
 #[test]
 fn every_shader_validates_with_naga() {
-    for mapping in Mapping::ALL {
-        let source = shader_source(mapping);
+    for (mapping, source) in btfmrf_render::shader_sources() {
         let module = naga::front::wgsl::parse_str(&source)
             .unwrap_or_else(|e| panic!("{mapping}: {}", e.emit_to_string(&source)));
         naga::valid::Validator::new(
@@ -144,8 +142,8 @@ fn gpu_equals_the_cpu_reference_on_a_flat_plane() {
             .unwrap()
             .into_keys()
             .collect();
-        assert_eq!(gpu.plan.clusters, cpu_clusters);
-        assert_eq!(gpu.plan.clusters.len(), cache.synthesized());
+        assert_eq!(gpu.stats.plan.clusters, cpu_clusters);
+        assert_eq!(gpu.stats.plan.clusters.len(), cache.synthesized());
         let err = (&gpu.image - &cpu).mapv(f32::abs);
         let scale = cpu.iter().fold(0.0f32, |m, &x| m.max(x.abs())).max(1e-3);
         let max = err.iter().fold(0.0f32, |m, &x| m.max(x));
@@ -326,7 +324,7 @@ fn the_relief_does_not_change_with_the_texture_resolution() {
     };
     let (coarse, fine) = (render(128), render(256));
     assert_eq!(
-        (coarse.plan.texture_size, fine.plan.texture_size),
+        (coarse.stats.plan.texture_size, fine.stats.plan.texture_size),
         (128, 256)
     );
     // Blocks of 16 pixels hold about 16 texels of the 256-texel tile: the scale of the
@@ -410,12 +408,12 @@ fn a_shared_cache_synthesizes_each_subspace_once_and_changes_nothing() {
     let a = renderer
         .render_cached(&model, &cache, &mesh, &first, Mapping::Bump)
         .unwrap();
-    assert_eq!(a.subspaces_synthesized, a.plan.clusters.len());
-    assert_eq!(cache.synthesized(), a.plan.clusters.len());
+    assert_eq!(a.stats.subspaces_synthesized, a.stats.plan.clusters.len());
+    assert_eq!(cache.synthesized(), a.stats.plan.clusters.len());
     let again = renderer
         .render_cached(&model, &cache, &mesh, &first, Mapping::Bump)
         .unwrap();
-    assert_eq!(again.subspaces_synthesized, 0);
+    assert_eq!(again.stats.subspaces_synthesized, 0);
     assert_eq!(again.image, a.image);
     // Another light adds only what the cache lacks.
     let b = renderer
@@ -428,12 +426,13 @@ fn a_shared_cache_synthesizes_each_subspace_once_and_changes_nothing() {
         )
         .unwrap();
     let new: Vec<_> = b
+        .stats
         .plan
         .clusters
         .iter()
-        .filter(|k| !a.plan.clusters.contains(k))
+        .filter(|k| !a.stats.plan.clusters.contains(k))
         .collect();
-    assert_eq!(b.subspaces_synthesized, new.len());
+    assert_eq!(b.stats.subspaces_synthesized, new.len());
     // The same picture as a render that synthesized just its own clusters.
     let alone = renderer
         .render_model(
@@ -686,7 +685,8 @@ fn the_render_command_renders_an_lpca_sphere() {
             "--json",
         ]);
         let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
-        assert_eq!(report["mapping"], "lpca", "{report}");
+        assert_eq!(report["material"], "lpca", "{report}");
+        assert_eq!(report["method"], "lpca", "{report}");
         let image = io::read_image(&out).unwrap();
         assert_eq!(image.dim(), (3, 96, 96));
         let lit = image.iter().filter(|&&x| x > 0.01).count();
@@ -708,7 +708,11 @@ fn the_render_command_renders_an_lpca_sphere() {
         "--mapping",
         "bump",
     ]);
-    assert!(e.contains("--mapping lpca"), "{e}");
+    assert!(
+        e.contains("--mapping bump") && e.contains("LPCA model"),
+        "{e}"
+    );
+    // `lpca` is a material (told by the file), not a mapping.
     let golden = golden_model_path();
     let e = common::fails(&[
         "render",
@@ -718,6 +722,9 @@ fn the_render_command_renders_an_lpca_sphere() {
         "--mapping",
         "lpca",
     ]);
-    assert!(e.contains("not an LPCA model"), "{e}");
+    assert!(
+        e.contains("'lpca' is not bump, displacement or plain"),
+        "{e}"
+    );
     assert!(!out.exists());
 }
