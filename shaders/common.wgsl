@@ -21,6 +21,10 @@ struct Globals {
     params: vec4<f32>,
     // x: measured views, y: measured lights.
     counts: vec4<u32>,
+    // x, y: where view and light directions are clamped (radians; 90 degrees, or the set's
+    // lowest direction if below the horizon, as the CPU's DirectionSet::interpolate), z: the
+    // tangent-frame z at and below which the light is beyond the set's lowest light.
+    limits: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> globals: Globals;
@@ -45,9 +49,10 @@ struct VertexOutput {
     @location(3) uv: vec2<f32>,
 }
 
-// Azimuthal-equidistant projection of a unit tangent-frame vector, theta clamped to 90 deg.
-fn project_dir(v: vec3<f32>) -> vec2<f32> {
-    let theta = min(acos(clamp(v.z, -1.0, 1.0)), HALF_PI);
+// Azimuthal-equidistant projection of a unit tangent-frame vector, theta clamped to max_theta
+// radians (globals.limits.x for views, .y for lights).
+fn project_dir(v: vec3<f32>, max_theta: f32) -> vec2<f32> {
+    let theta = min(acos(clamp(v.z, -1.0, 1.0)), max_theta);
     let r = length(v.xy);
     if (r < 1e-7) {
         return vec2<f32>(0.0, 0.0);

@@ -55,7 +55,7 @@ fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
     let v = dirs.v;
     let l = dirs.l;
     let falloff = dirs.falloff;
-    if (l.z <= 0.0) {
+    if (l.z <= globals.limits.z) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
     // Nearest texel, the measured tile repeating over the mesh's texture coordinates.
@@ -63,8 +63,8 @@ fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
     let x = min(u32(uv.x * f32(lpca.x)), lpca.x - 1u);
     let y = min(u32(uv.y * f32(lpca.y)), lpca.y - 1u);
     let texel = y * lpca.x + x;
-    let iv = interpolate_dir(project_dir(v), true);
-    let il = interpolate_dir(project_dir(l), false);
+    let iv = interpolate_dir(project_dir(v, globals.limits.x), true);
+    let il = interpolate_dir(project_dir(l, globals.limits.y), false);
     var sum = vec3<f32>(0.0);
     for (var a = 0; a < 3; a++) {
         for (var b = 0; b < 3; b++) {

@@ -3,7 +3,8 @@
 // bump_relight); the buffers are built in crates/render/src/mrf.rs.
 //
 // Globals.params here: y = 1 when the model has a range map, z = displacement scale (world
-// units per height texel), w = unused.
+// units per height texel), w = unused. Lights at or beyond the set's lowest light
+// (globals.limits.z) leave a fragment black.
 
 const SHADING_GRID: u32 = 64u;
 const NO_LAYER: u32 = 0xffffffffu;
@@ -17,6 +18,8 @@ const NO_LAYER: u32 = 0xffffffffu;
 @group(0) @binding(8) var<storage, read> pair_layer: array<u32>;
 // Mean of max(0, n . l) over the texture, on a SHADING_GRID^2 node grid of light directions.
 @group(0) @binding(9) var<storage, read> mean_shade: array<f32>;
+// Per measured light, the bump strength k of the shading factor 1 + k (s - 1).
+@group(0) @binding(10) var<storage, read> light_strength: array<f32>;
 
 // Mean of max(0, n . l) over the texture for the projected tangent-frame light direction q
 // (bilinear in the table).
@@ -34,8 +37,9 @@ fn mean_shading(q: vec2<f32>) -> f32 {
 
 // The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
 // light) pairs blend their clusters' subspace images, then the range map's normal relights
-// the blend for the light, divided by the mean shading so that the subspace images' own
-// average shading is not applied twice (bump_relight). Clusters that were not synthesized
+// the blend for the light by the factor 1 + k (s - 1), s = max(0, n . l) / mean shading, so
+// that the subspace images' own average shading is not applied twice, k the measured
+// strength (bump_relight, bump_strength). Clusters that were not synthesized
 // (outside the planned set) are skipped and the weights renormalised.
 fn shade_mrf(in: VertexOutput) -> vec4<f32> {
     let dirs = tangent_directions(in);
@@ -45,11 +49,11 @@ fn shade_mrf(in: VertexOutput) -> vec4<f32> {
     let ddx = dpdx(in.uv);
     let ddy = dpdy(in.uv);
     let relief_here = textureSampleGrad(relief, tex_sampler, in.uv, ddx, ddy);
-    if (l.z <= 0.0) {
+    if (l.z <= globals.limits.z) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
-    let ql = project_dir(l);
-    let iv = interpolate_dir(project_dir(v), true);
+    let ql = project_dir(l, globals.limits.y);
+    let iv = interpolate_dir(project_dir(v, globals.limits.x), true);
     let il = interpolate_dir(ql, false);
     var sum = vec3<f32>(0.0);
     var total = 0.0;
@@ -69,7 +73,13 @@ fn shade_mrf(in: VertexOutput) -> vec4<f32> {
     if (globals.params.y > 0.5) {
         let mean = mean_shading(ql);
         if (mean >= 1e-3) {
-            colour *= max(dot(relief_here.xyz, l), 0.0) / mean;
+            // The measured lights' strengths, blended like the images (bump_strength).
+            var k = 0.0;
+            for (var b = 0; b < 3; b++) {
+                k += il.weight[b] * light_strength[il.index[b]];
+            }
+            let s = max(dot(relief_here.xyz, l), 0.0) / mean;
+            colour *= 1.0 + k * (s - 1.0);
         }
     }
     return vec4<f32>(colour * falloff, 1.0);

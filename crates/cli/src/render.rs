@@ -154,10 +154,9 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         width,
         height,
     };
-    let renderer = Renderer::new()?;
     let out = if is_lpca {
         let model = lpca::format::read(&args.model)?;
-        renderer.render_material(Material::Lpca(&model), &mesh, &scene)?
+        Renderer::new()?.render_material(Material::Lpca(&model), &mesh, &scene)?
     } else {
         let model = format::read(&args.model)?;
         // The subspace images are synthesized at the tile's side, whatever the texture size.
@@ -187,7 +186,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             max_texture_size: args.max_texture_size.clamp(32, 8192),
             tile: args.tile,
         };
-        renderer.render_material(Material::Mrf(&model, options), &mesh, &scene)?
+        Renderer::new()?.render_material(Material::Mrf(&model, options), &mesh, &scene)?
     };
     io::write_image(&args.out, &out.image)
         .with_context(|| format!("writing {}", args.out.display()))?;

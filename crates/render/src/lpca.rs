@@ -17,8 +17,8 @@ use wgpu::util::DeviceExt;
 
 use super::lut::DirectionLut;
 use super::pipeline::{
-    COMMON_WGSL, CommonBuffers, Globals, GpuMesh, bind_group_layout, common_layout_entries,
-    render_pipeline, storage_buffer, storage_entry, uniform_entry,
+    COMMON_WGSL, CommonBuffers, GpuMesh, bind_group_layout, common_layout_entries, render_pipeline,
+    storage_buffer, storage_entry, uniform_entry,
 };
 use super::scene::Scene;
 use super::{GpuContext, RenderError, Result};
@@ -140,7 +140,6 @@ impl LpcaTables {
 pub struct GpuLpca {
     common: CommonBuffers,
     bind_group: wgpu::BindGroup,
-    counts: (usize, usize),
 }
 
 impl GpuLpca {
@@ -209,17 +208,12 @@ impl GpuLpca {
                 entries: &entries,
             })
         })?;
-        Ok(Self {
-            common,
-            bind_group,
-            counts: tables.counts,
-        })
+        Ok(Self { common, bind_group })
     }
 
     /// Writes the uniforms of one frame (the point-light falloff as in the MRF pass).
     pub fn set_frame(&self, ctx: &GpuContext, scene: &Scene) {
-        self.common
-            .write(ctx, &Globals::new(scene, self.counts, [0.0; 3]));
+        self.common.write(ctx, scene, [0.0; 3]);
     }
 }
 

@@ -8,8 +8,8 @@ use wgpu::util::DeviceExt;
 
 use super::lut::{DirectionLut, MeanShading};
 use super::pipeline::{
-    COMMON_WGSL, CommonBuffers, Globals, GpuMesh, bind_group_layout, common_layout_entries,
-    render_pipeline, storage_buffer, storage_entry,
+    COMMON_WGSL, CommonBuffers, GpuMesh, bind_group_layout, common_layout_entries, render_pipeline,
+    storage_buffer, storage_entry,
 };
 use super::scene::Scene;
 use super::{GpuContext, Mapping, RenderError, Result};
@@ -50,6 +50,9 @@ pub struct MaterialTables {
     pub light_lut: DirectionLut,
     /// Mean shading of the range map's normals (`None` without a range map).
     pub mean_shading: Option<MeanShading>,
+    /// Per measured light, the bump strength `k` of the shading factor `1 + k (s - 1)`
+    /// ([`btfmrf::geometry::relight`]; 1 where the model stores none).
+    pub light_strength: Vec<f32>,
 }
 
 impl MaterialTables {
@@ -90,6 +93,9 @@ impl MaterialTables {
             view_lut,
             light_lut,
             mean_shading: cache.normals().map(MeanShading::new),
+            light_strength: (0..nl)
+                .map(|l| model.range_map.as_ref().map_or(1.0, |m| m.strength_of(l)) as f32)
+                .collect(),
         })
     }
 
@@ -126,8 +132,6 @@ pub struct GpuMaterial {
     pub size: usize,
     /// Side of the synthesized tile, measured texels (the unit of the range map's heights).
     pub tile: usize,
-    /// Measured views and lights.
-    pub counts: (usize, usize),
     /// True when the model has a range map.
     pub has_relief: bool,
 }
@@ -265,6 +269,11 @@ impl GpuMaterial {
         let ones = vec![1.0f32; super::lut::SHADING_GRID * super::lut::SHADING_GRID];
         let shading = tables.mean_shading.as_ref().map_or(&ones, |m| &m.values);
         let mean_shade = storage_buffer(ctx, "mean shading", bytemuck::cast_slice(shading))?;
+        let light_strength = storage_buffer(
+            ctx,
+            "light strengths",
+            bytemuck::cast_slice(&tables.light_strength),
+        )?;
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("repeat"),
             address_mode_u: wgpu::AddressMode::Repeat,
@@ -301,6 +310,10 @@ impl GpuMaterial {
                 binding: 9,
                 resource: mean_shade.as_entire_binding(),
             },
+            wgpu::BindGroupEntry {
+                binding: 10,
+                resource: light_strength.as_entire_binding(),
+            },
         ]);
         let bind_group = ctx.checked("material bind group", || {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -314,7 +327,6 @@ impl GpuMaterial {
             bind_group,
             size,
             tile,
-            counts: tables.counts,
             has_relief,
         })
     }
@@ -327,8 +339,7 @@ impl GpuMaterial {
             mesh.world_per_uv / self.tile as f32,
             0.0,
         ];
-        self.common
-            .write(ctx, &Globals::new(scene, self.counts, own));
+        self.common.write(ctx, scene, own);
     }
 }
 
@@ -369,6 +380,7 @@ impl MrfPass {
             },
             storage_entry(8),
             storage_entry(9),
+            storage_entry(10),
         ]);
         let layout = bind_group_layout(ctx, "mrf material", &entries);
         let pipeline = |mapping: Mapping| {

@@ -31,12 +31,15 @@ pub struct Globals {
     pub params: [f32; 4],
     /// Measured views, measured lights.
     pub counts: [u32; 4],
+    /// Where view and light directions are clamped ([`DirectionLut::max_theta`], radians),
+    /// then the light's [`DirectionLut::horizon_z`].
+    pub limits: [f32; 4],
 }
 
 impl Globals {
-    /// The uniforms of one frame of `scene` for a material measured at `counts` (views,
-    /// lights) directions; `own` are the material's `params.yzw`.
-    pub fn new(scene: &Scene, counts: (usize, usize), own: [f32; 3]) -> Self {
+    /// The uniforms of one frame of `scene`: `template` holds `counts` and `limits`, `own`
+    /// the material's `params.yzw`.
+    fn new(scene: &Scene, template: &Globals, own: [f32; 3]) -> Self {
         Self {
             view_proj: scene.camera.view_proj(scene.aspect()),
             camera: scene.camera.to_vec4(),
@@ -47,7 +50,8 @@ impl Globals {
                 own[1],
                 own[2],
             ],
-            counts: [counts.0 as u32, counts.1 as u32, 0, 0],
+            counts: template.counts,
+            limits: template.limits,
         }
     }
 }
@@ -122,6 +126,8 @@ pub(crate) fn common_layout_entries() -> [wgpu::BindGroupLayoutEntry; 5] {
 /// The uniforms and direction tables of one material on the GPU: what `common.wgsl` binds.
 #[derive(Debug)]
 pub(crate) struct CommonBuffers {
+    /// The uniforms that come from the tables (`counts`, `limits`; the rest zero).
+    template: Globals,
     globals: wgpu::Buffer,
     /// View cells, light cells, view points, light points (bindings 4..7).
     tables: [wgpu::Buffer; 4],
@@ -133,7 +139,18 @@ impl CommonBuffers {
     /// # Errors
     /// A buffer the device refuses.
     pub(crate) fn new(ctx: &GpuContext, luts: (&DirectionLut, &DirectionLut)) -> Result<Self> {
+        let template = Globals {
+            counts: [luts.0.points.len() as u32, luts.1.points.len() as u32, 0, 0],
+            limits: [
+                luts.0.max_theta as f32,
+                luts.1.max_theta as f32,
+                luts.1.horizon_z() as f32,
+                0.0,
+            ],
+            ..bytemuck::Zeroable::zeroed()
+        };
         Ok(Self {
+            template,
             globals: globals_buffer(ctx),
             tables: [
                 storage_buffer(ctx, "view cells", bytemuck::cast_slice(&luts.0.cells))?,
@@ -159,10 +176,11 @@ impl CommonBuffers {
         entries
     }
 
-    /// Writes one frame's uniforms.
-    pub(crate) fn write(&self, ctx: &GpuContext, globals: &Globals) {
+    /// Writes the uniforms of one frame of `scene`; `own` are the material's `params.yzw`.
+    pub(crate) fn write(&self, ctx: &GpuContext, scene: &Scene, own: [f32; 3]) {
+        let globals = Globals::new(scene, &self.template, own);
         ctx.queue
-            .write_buffer(&self.globals, 0, bytemuck::bytes_of(globals));
+            .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
     }
 }
 
