@@ -208,6 +208,20 @@ fn node_vector(x: usize, y: usize) -> [f64; 3] {
 mod tests {
     use super::*;
 
+    /// The largest difference between the CPU's interpolation weights of `d` and the
+    /// table's, compared as sparse weight vectors over direction indices.
+    fn weight_difference(set: &DirectionSet, lut: &DirectionLut, d: &Direction) -> f64 {
+        let mut diff = vec![0.0f64; set.len()];
+        for c in set.interpolate(d).unwrap() {
+            diff[c.index] += c.weight;
+        }
+        let (idx, w) = lut.lookup(d.vector());
+        for k in 0..3 {
+            diff[idx[k]] -= w[k];
+        }
+        diff.iter().map(|x| x.abs()).fold(0.0, f64::max)
+    }
+
     #[test]
     fn the_direction_table_reproduces_cpu_interpolation() {
         let set = DirectionSet::bonn();
@@ -216,17 +230,7 @@ mod tests {
         for t in 0..=45 {
             for p in 0..72 {
                 let d = Direction::new(t as f64 * 2.0, p as f64 * 5.0 + 1.3);
-                let cpu = set.interpolate(&d).unwrap();
-                let (idx, w) = lut.lookup(d.vector());
-                // Compare as sparse weight vectors over direction indices.
-                let mut diff = vec![0.0f64; set.len()];
-                for c in cpu {
-                    diff[c.index] += c.weight;
-                }
-                for k in 0..3 {
-                    diff[idx[k]] -= w[k];
-                }
-                worst = worst.max(diff.iter().map(|x| x.abs()).fold(0.0, f64::max));
+                worst = worst.max(weight_difference(&set, &lut, &d));
                 count += 1;
             }
         }
@@ -254,16 +258,7 @@ mod tests {
         assert!(lut.horizon_z() < -0.08);
         for (theta, phi) in [(92.0, 10.0), (95.0, 200.0), (80.0, 33.0)] {
             let d = Direction::new(theta, phi);
-            let cpu = set.interpolate(&d).unwrap();
-            let (idx, w) = lut.lookup(d.vector());
-            let mut diff = vec![0.0f64; set.len()];
-            for c in cpu {
-                diff[c.index] += c.weight;
-            }
-            for k in 0..3 {
-                diff[idx[k]] -= w[k];
-            }
-            let worst = diff.iter().map(|x| x.abs()).fold(0.0, f64::max);
+            let worst = weight_difference(&set, &lut, &d);
             assert!(worst < 1e-6, "{d:?}: largest weight difference {worst}");
         }
         assert_eq!(
