@@ -1,5 +1,5 @@
 // MRF + bump mapping: the mesh as it is; per fragment the BTF of the 3 x 3 nearest measured
-// pairs, relit by the range map's normals (shade_mrf in common.wgsl).
+// pairs, relit by the range map's normals (shade_mrf in mrf.wgsl).
 
 @vertex
 fn vs_main(in: VertexInput) -> VertexOutput {

@@ -1,13 +1,13 @@
-// Shared declarations and helpers of the MRF pipelines (bump, displacement, plain). Prepended
-// to each pipeline's file at load time. The CPU reference is src/synthesis.rs
-// (image_from_cache, bump_relight) and src/btf/directions.rs (DirectionSet::interpolate);
-// the lookup tables are built in src/render/lut.rs.
+// Declarations and helpers every pipeline shares, prepended to each pipeline's WGSL at load
+// time (crates/render/src/pipeline.rs): the uniforms (binding 0), the direction tables
+// (bindings 4..7), the vertex transform, the tangent frame and the direction interpolation.
+// A material's own bindings live in its own file (mrf.wgsl, lpca.wgsl). The CPU reference is
+// src/btf/directions.rs (DirectionSet::interpolate); the tables are built in
+// crates/render/src/lut.rs.
 
 const PI: f32 = 3.14159265358979;
 const HALF_PI: f32 = 1.57079632679490;
 const DIRECTION_GRID: u32 = 128u;
-const SHADING_GRID: u32 = 64u;
-const NO_LAYER: u32 = 0xffffffffu;
 
 struct Globals {
     view_proj: mat4x4<f32>,
@@ -17,30 +17,23 @@ struct Globals {
     // xyz: light position (w = 1) or direction towards the light (w = 0).
     light: vec4<f32>,
     // x: squared light distance from the origin (point light falloff, 1 at the origin),
-    // y: 1 when the model has a range map, z: displacement scale (world units per height
-    // texel), w: the texture layer shown by the plain pipeline.
+    // y, z, w: the material's own (see mrf.wgsl).
     params: vec4<f32>,
     // x: measured views, y: measured lights.
     counts: vec4<u32>,
+    // x, y: where view and light directions are clamped (radians; 90 degrees, or the set's
+    // lowest direction if below the horizon, as the CPU's DirectionSet::interpolate), z: the
+    // tangent-frame z at and below which the light is beyond the set's lowest light.
+    limits: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> globals: Globals;
-// The synthesized subspace images (tileable), one layer per synthesized cluster.
-@group(0) @binding(1) var subspaces: texture_2d_array<f32>;
-// Range map: xyz = unit normal in the tangent frame, w = height in texels (mean 0).
-@group(0) @binding(2) var relief: texture_2d<f32>;
-@group(0) @binding(3) var tex_sampler: sampler;
 // Per direction-grid cell: the Delaunay triangle (3 direction indices).
 @group(0) @binding(4) var<storage, read> view_cells: array<vec4<u32>>;
 @group(0) @binding(5) var<storage, read> light_cells: array<vec4<u32>>;
 // Projected coordinates of the measured directions.
 @group(0) @binding(6) var<storage, read> view_points: array<vec2<f32>>;
 @group(0) @binding(7) var<storage, read> light_points: array<vec2<f32>>;
-// (view * lights + light) -> texture layer of its cluster, NO_LAYER when not synthesized.
-@group(0) @binding(8) var<storage, read> pair_layer: array<u32>;
-// Mean of max(0, n . l) over the texture, on a SHADING_GRID^2 node grid of light directions.
-@group(0) @binding(9) var<storage, read> mean_shade: array<f32>;
-
 struct VertexInput {
     @location(0) position: vec3<f32>,
     @location(1) normal: vec3<f32>,
@@ -56,9 +49,10 @@ struct VertexOutput {
     @location(3) uv: vec2<f32>,
 }
 
-// Azimuthal-equidistant projection of a unit tangent-frame vector, theta clamped to 90 deg.
-fn project_dir(v: vec3<f32>) -> vec2<f32> {
-    let theta = min(acos(clamp(v.z, -1.0, 1.0)), HALF_PI);
+// Azimuthal-equidistant projection of a unit tangent-frame vector, theta clamped to max_theta
+// radians (globals.limits.x for views, .y for lights).
+fn project_dir(v: vec3<f32>, max_theta: f32) -> vec2<f32> {
+    let theta = min(acos(clamp(v.z, -1.0, 1.0)), max_theta);
     let r = length(v.xy);
     if (r < 1e-7) {
         return vec2<f32>(0.0, 0.0);
@@ -167,20 +161,6 @@ fn interpolate_dir(q: vec2<f32>, is_view: bool) -> Interpolated {
     return best;
 }
 
-// Mean of max(0, n . l) over the texture for the projected tangent-frame light direction q
-// (bilinear in the table).
-fn mean_shading(q: vec2<f32>) -> f32 {
-    let last = f32(SHADING_GRID - 1u);
-    let f = clamp((q + vec2<f32>(HALF_PI)) / PI * last, vec2<f32>(0.0), vec2<f32>(last));
-    let x0 = min(u32(floor(f.x)), SHADING_GRID - 2u);
-    let y0 = min(u32(floor(f.y)), SHADING_GRID - 2u);
-    let t = f - vec2<f32>(f32(x0), f32(y0));
-    let i = y0 * SHADING_GRID + x0;
-    let top = mix(mean_shade[i], mean_shade[i + 1u], t.x);
-    let bottom = mix(mean_shade[i + SHADING_GRID], mean_shade[i + SHADING_GRID + 1u], t.x);
-    return mix(top, bottom, t.y);
-}
-
 // The tangent frame (x = tangent, y = bitangent = image up, z = normal) at a fragment.
 fn tangent_frame(normal: vec3<f32>, tangent: vec4<f32>) -> mat3x3<f32> {
     let n = normalize(normal);
@@ -223,47 +203,4 @@ fn tangent_directions(in: VertexOutput) -> TangentDirections {
         falloff = globals.params.x / max(dot(l_world, l_world), 1e-8);
     }
     return TangentDirections(to_world * v_world, to_world * normalize(l_world), falloff);
-}
-
-// The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
-// light) pairs blend their clusters' subspace images, then the range map's normal relights
-// the blend for the light, divided by the mean shading so that the subspace images' own
-// average shading is not applied twice (bump_relight). Clusters that were not synthesized
-// (outside the planned set) are skipped and the weights renormalised.
-fn shade_mrf(in: VertexOutput) -> vec4<f32> {
-    let dirs = tangent_directions(in);
-    let v = dirs.v;
-    let l = dirs.l;
-    let falloff = dirs.falloff;
-    let ddx = dpdx(in.uv);
-    let ddy = dpdy(in.uv);
-    let relief_here = textureSampleGrad(relief, tex_sampler, in.uv, ddx, ddy);
-    if (l.z <= 0.0) {
-        return vec4<f32>(0.0, 0.0, 0.0, 1.0);
-    }
-    let ql = project_dir(l);
-    let iv = interpolate_dir(project_dir(v), true);
-    let il = interpolate_dir(ql, false);
-    var sum = vec3<f32>(0.0);
-    var total = 0.0;
-    for (var a = 0; a < 3; a++) {
-        for (var b = 0; b < 3; b++) {
-            let w = iv.weight[a] * il.weight[b];
-            if (w > 0.0) {
-                let layer = pair_layer[iv.index[a] * globals.counts.y + il.index[b]];
-                if (layer != NO_LAYER) {
-                    sum += w * textureSampleGrad(subspaces, tex_sampler, in.uv, layer, ddx, ddy).rgb;
-                    total += w;
-                }
-            }
-        }
-    }
-    var colour = sum / max(total, 1e-12);
-    if (globals.params.y > 0.5) {
-        let mean = mean_shading(ql);
-        if (mean >= 1e-3) {
-            colour *= max(dot(relief_here.xyz, l), 0.0) / mean;
-        }
-    }
-    return vec4<f32>(colour * falloff, 1.0);
 }

@@ -2,8 +2,8 @@
 // measured (view, light) pairs are rebuilt from its cluster's mean and eigen-ABRDFs and its
 // own weights, then blended with the barycentric weights of common.wgsl's direction tables.
 // The CPU reference is LpcaModel::reconstruct / reconstruct_direction (src/lpca/mod.rs); the
-// buffers are built in src/render/lpca.rs. Uses group 0 bindings 0 and 4..7 of common.wgsl
-// (uniforms, direction tables) and its own bindings 10..13.
+// buffers are built in crates/render/src/lpca.rs. After common.wgsl (uniforms, direction
+// tables); its own bindings are 10..13.
 
 // x: texture width, y: height (texels), z: components C, w: 1 for PCA RF (one factorization
 // per view), 0 for LPCA (one factorization, K clusters).
@@ -15,6 +15,12 @@
 // Per (group, pair): the mean then the C eigen-ABRDF values, rgb. LPCA: group = cluster,
 // pair = view * lights + light; PCA RF: group = view, pair = light.
 @group(0) @binding(13) var<storage, read> eigen: array<vec4<f32>>;
+
+// Where row `row` (0: the mean, 1..=C: eigen-ABRDF) of pair `pair` of `group` sits in
+// `eigen`: the formula of eigen_slot in crates/render/src/lpca.rs.
+fn eigen_slot(group: u32, pair: u32, row: u32, pairs: u32, c: u32) -> u32 {
+    return (group * pairs + pair) * (c + 1u) + row;
+}
 
 // Image (view v, light l) at a texel, negative values clamped to 0 like the CPU's.
 fn lpca_value(texel: u32, v: u32, l: u32) -> vec3<f32> {
@@ -31,10 +37,9 @@ fn lpca_value(texel: u32, v: u32, l: u32) -> vec3<f32> {
         pairs = nl;
         wbase = (v * n + texel) * c;
     }
-    let e = (group * pairs + pair) * (c + 1u);
-    var acc = eigen[e].xyz;
+    var acc = eigen[eigen_slot(group, pair, 0u, pairs, c)].xyz;
     for (var t = 0u; t < c; t++) {
-        acc += texel_weights[wbase + t] * eigen[e + 1u + t].xyz;
+        acc += texel_weights[wbase + t] * eigen[eigen_slot(group, pair, t + 1u, pairs, c)].xyz;
     }
     return max(acc, vec3<f32>(0.0));
 }
@@ -50,7 +55,7 @@ fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
     let v = dirs.v;
     let l = dirs.l;
     let falloff = dirs.falloff;
-    if (l.z <= 0.0) {
+    if (l.z <= globals.limits.z) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
     // Nearest texel, the measured tile repeating over the mesh's texture coordinates.
@@ -58,8 +63,8 @@ fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
     let x = min(u32(uv.x * f32(lpca.x)), lpca.x - 1u);
     let y = min(u32(uv.y * f32(lpca.y)), lpca.y - 1u);
     let texel = y * lpca.x + x;
-    let iv = interpolate_dir(project_dir(v), true);
-    let il = interpolate_dir(project_dir(l), false);
+    let iv = interpolate_dir(project_dir(v, globals.limits.x), true);
+    let il = interpolate_dir(project_dir(l, globals.limits.y), false);
     var sum = vec3<f32>(0.0);
     for (var a = 0; a < 3; a++) {
         for (var b = 0; b < 3; b++) {

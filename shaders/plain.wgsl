@@ -1,4 +1,4 @@
-// Plain texturing, the cost baseline: one sample of one subspace image, no view or light
+// Plain texturing, the cost baseline: one sample of the first synthesized subspace image, no view or light
 // dependence, no relighting.
 
 @vertex
@@ -8,6 +8,5 @@ fn vs_main(in: VertexInput) -> VertexOutput {
 
 @fragment
 fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
-    let layer = u32(globals.params.w);
-    return vec4<f32>(textureSample(subspaces, tex_sampler, in.uv, layer).rgb, 1.0);
+    return vec4<f32>(textureSample(subspaces, tex_sampler, in.uv, 0u).rgb, 1.0);
 }

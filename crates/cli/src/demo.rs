@@ -225,10 +225,10 @@ fn renders(
                 md.push_str(&format!(
                     "| {kind} | {mapping} | {theta:.0}, {phi:.0} | ![{name}]({name}) | {} of {} \
                      | {} | {:.2} | {:.3} |\n",
-                    r.plan.clusters.len(),
-                    r.subspaces_total,
-                    r.subspaces_synthesized,
-                    r.synthesis_seconds,
+                    r.stats.plan.clusters.len(),
+                    r.stats.subspaces_total,
+                    r.stats.subspaces_synthesized,
+                    r.stats.synthesis_seconds,
                     r.render_seconds
                 ));
             }

@@ -7,8 +7,9 @@ use btfmrf::btf::{Direction, io};
 use btfmrf::lpca;
 use btfmrf::memory;
 use btfmrf::model::format;
-use btfmrf_render::headless::ModelRenderOptions;
-use btfmrf_render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
+use btfmrf_render::{
+    Camera, Light, Mapping, Material, MeshKind, ModelRenderOptions, RenderStats, Renderer, Scene,
+};
 
 use super::synthesize::{parse_direction, parse_size};
 use super::{Global, emit};
@@ -24,7 +25,8 @@ use super::{Global, emit};
 /// of --tile (4x per doubling) times the clusters the view touches; the texture size changes
 /// only the (small) GPU cost.
 /// An LPCA model (.lpca, told by its magic bytes; also pca-rf) is decoded per fragment on
-/// the GPU instead (--mapping lpca, the default for it): nothing is synthesized.
+/// the GPU instead, on the mesh as it is (it has no range map, so no --mapping): nothing is
+/// synthesized.
 ///
 /// Examples:
 ///   btfmrf render sponge.btfm --out sphere.png --size 800x800 --mesh sphere --mapping bump
@@ -45,9 +47,9 @@ pub struct Args {
     /// sphere, plane, cloth, torus, or an OBJ file (with texture coordinates).
     #[arg(long, default_value = "sphere")]
     mesh: MeshKind,
-    /// bump, displacement, plain (one subspace image as a plain texture, no view or light
-    /// dependence: the cost baseline) or lpca (.lpca models only). Default: bump, or lpca for
-    /// an .lpca model.
+    /// How an MRF model (.btfm) meets the geometry: bump, displacement, or plain (one
+    /// subspace image as a plain texture, no view or light dependence: the cost baseline).
+    /// Default: bump. Not for an .lpca model.
     #[arg(long)]
     mapping: Option<Mapping>,
     /// Camera direction "theta,phi" in degrees, seen from the object (phi 270 = in front).
@@ -95,7 +97,7 @@ pub struct Args {
 pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let (rows, cols) = args.size;
     let (width, height) = (u32::try_from(cols)?, u32::try_from(rows)?);
-    btfmrf_render::headless::check_size(width, height)?;
+    btfmrf_render::frame::check_size(width, height)?;
     if !(args.distance.is_finite() && args.distance > 0.0) {
         anyhow::bail!("invalid --distance {}: must be positive", args.distance);
     }
@@ -127,21 +129,17 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             .with_context(|| format!("reading {}", args.model.display()))?;
         lpca::format::is_lpca(&head)
     };
-    let mapping = match (is_lpca, args.mapping) {
-        (true, None | Some(Mapping::Lpca)) => Mapping::Lpca,
-        (true, Some(m)) => anyhow::bail!(
-            "invalid --mapping {m}: {} is an LPCA model, which renders with --mapping lpca only",
+    if is_lpca && let Some(m) = args.mapping {
+        anyhow::bail!(
+            "invalid --mapping {m}: {} is an LPCA model, decoded on the mesh as it is \
+             (--mapping applies to MRF models)",
             args.model.display()
-        ),
-        (false, Some(Mapping::Lpca)) => anyhow::bail!(
-            "invalid --mapping lpca: {} is not an LPCA model (.lpca)",
-            args.model.display()
-        ),
-        (false, m) => m.unwrap_or(Mapping::Bump),
-    };
+        );
+    }
+    let mapping = args.mapping.unwrap_or(Mapping::Bump);
     let detail = args.detail.unwrap_or(match mapping {
         Mapping::Displacement => 384,
-        _ => 64,
+        Mapping::Bump | Mapping::Plain => 64,
     });
     let mesh = args.mesh.build(detail, args.repeats)?;
     let scene = Scene {
@@ -156,11 +154,9 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         width,
         height,
     };
-    let mut method = None;
     let out = if is_lpca {
         let model = lpca::format::read(&args.model)?;
-        method = Some(model.method().name());
-        Renderer::new()?.render_lpca(&model, &mesh, &scene)?
+        Renderer::new()?.render_material(Material::Lpca(&model), &mesh, &scene)?
     } else {
         let model = format::read(&args.model)?;
         // The subspace images are synthesized at the tile's side, whatever the texture size.
@@ -183,64 +179,73 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                 fits.map_or("nothing fits".into(), |s| format!("--tile {s} fits"))
             },
         )?;
-        Renderer::new()?.render_model(
-            &model,
-            &mesh,
-            &scene,
-            &ModelRenderOptions {
-                mapping,
-                seed: args.seed,
-                texture_size: args.texture_size,
-                max_texture_size: args.max_texture_size.clamp(32, 8192),
-                tile: args.tile,
-            },
-        )?
+        let options = ModelRenderOptions {
+            mapping,
+            seed: args.seed,
+            texture_size: args.texture_size,
+            max_texture_size: args.max_texture_size.clamp(32, 8192),
+            tile: args.tile,
+        };
+        Renderer::new()?.render_material(Material::Mrf(&model, options), &mesh, &scene)?
     };
     io::write_image(&args.out, &out.image)
         .with_context(|| format!("writing {}", args.out.display()))?;
-    if args.json {
-        emit(serde_json::json!({
-            "out": args.out,
-            "adapter": out.adapter,
-            "mesh": args.mesh.to_string(),
-            "mapping": mapping.name(),
-            "method": method,
-            "width": width,
-            "height": height,
-            "texture_size": out.plan.texture_size,
-            "tile": out.tile,
-            "clusters": out.plan.clusters,
-            "subspaces_synthesized": out.subspaces_synthesized,
-            "subspaces_total": out.subspaces_total,
-            "texels_synthesized": out.texels_synthesized,
-            "synthesis_seconds": out.synthesis_seconds,
-            "render_seconds": out.render_seconds,
-        }))
-    } else if let Some(method) = method {
-        emit(format!(
-            "wrote {} ({}x{}, {method} model decoded per fragment on {}: {} cluster(s), a tile {} texels wide; rendered in {:.3} s)",
-            args.out.display(),
-            width,
-            height,
-            out.adapter,
-            out.plan.clusters.len(),
-            out.plan.texture_size,
-            out.render_seconds
-        ))
-    } else {
-        emit(format!(
+    let common = serde_json::json!({
+        "out": args.out,
+        "adapter": out.adapter,
+        "mesh": args.mesh.to_string(),
+        "width": width,
+        "height": height,
+        "render_seconds": out.render_seconds,
+    });
+    match &out.stats {
+        RenderStats::Mrf(s) if args.json => {
+            let mut report = common;
+            report["material"] = "mrf".into();
+            report["mapping"] = mapping.name().into();
+            report["texture_size"] = s.plan.texture_size.into();
+            report["tile"] = s.tile.into();
+            report["clusters"] = s.plan.clusters.clone().into();
+            report["subspaces_synthesized"] = s.subspaces_synthesized.into();
+            report["subspaces_total"] = s.subspaces_total.into();
+            report["texels_synthesized"] = s.texels_synthesized.into();
+            report["synthesis_seconds"] = s.synthesis_seconds.into();
+            emit(report)
+        }
+        RenderStats::Lpca(s) if args.json => {
+            let mut report = common;
+            report["material"] = "lpca".into();
+            report["method"] = s.method.name().into();
+            report["clusters"] = s.clusters.into();
+            report["model_width"] = s.size.0.into();
+            report["model_height"] = s.size.1.into();
+            emit(report)
+        }
+        RenderStats::Mrf(s) => emit(format!(
             "wrote {} ({}x{}, {} on {}; {} of {} subspace images synthesized at {}^2 in {:.3} s, sampled at {}^2, rendered in {:.3} s)",
             args.out.display(),
             width,
             height,
             mapping,
             out.adapter,
-            out.subspaces_synthesized,
-            out.subspaces_total,
-            out.tile,
-            out.synthesis_seconds,
-            out.plan.texture_size,
+            s.subspaces_synthesized,
+            s.subspaces_total,
+            s.tile,
+            s.synthesis_seconds,
+            s.plan.texture_size,
             out.render_seconds
-        ))
+        )),
+        RenderStats::Lpca(s) => emit(format!(
+            "wrote {} ({}x{}, {} model decoded per fragment on {}: {} cluster(s), a {}x{} tile; rendered in {:.3} s)",
+            args.out.display(),
+            width,
+            height,
+            s.method.name(),
+            out.adapter,
+            s.clusters,
+            s.size.0,
+            s.size.1,
+            out.render_seconds
+        )),
     }
 }

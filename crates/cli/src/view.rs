@@ -31,7 +31,7 @@ pub struct Args {
     /// The first mesh (then M cycles through sphere, cloth, torus, plane).
     #[arg(long, default_value = "sphere")]
     mesh: MeshKind,
-    /// bump or displacement (switch with B / D; plain and lpca are for `render` only).
+    /// bump, displacement or plain (switch with B / D).
     #[arg(long, default_value = "bump")]
     mapping: Mapping,
     /// Initial camera direction "theta,phi", degrees.
@@ -40,11 +40,16 @@ pub struct Args {
     /// Initial light direction "theta,phi", degrees.
     #[arg(long, value_parser = parse_direction, default_value = "45,300")]
     light: Direction,
-    /// Measured texels per texture repetition (a power of two), like `render --tile`: the
-    /// material's scale on the mesh. Every cluster is synthesized at this side when the
-    /// window opens, so the start-up cost grows with its square times the clusters.
-    #[arg(long, default_value_t = 256)]
-    texture_size: usize,
+    /// Measured texels per texture repetition (a power of two; the same range as `render
+    /// --tile`): the material's scale on the mesh. Every cluster is synthesized at this side
+    /// when the window opens, so the start-up cost grows with its square times the clusters.
+    #[arg(
+        long,
+        visible_alias = "texture-size",
+        value_name = "TEXELS",
+        default_value_t = 256
+    )]
+    tile: usize,
     /// Seed of the synthesis.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -58,11 +63,7 @@ pub struct Args {
 
 pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
     let (rows, cols) = args.size;
-    btfmrf_render::headless::check_size(u32::try_from(cols)?, u32::try_from(rows)?)?;
-    let n = args.texture_size;
-    if !n.is_power_of_two() || !(32..=4096).contains(&n) {
-        anyhow::bail!("invalid --texture-size {n}: a power of two within 32..=4096");
-    }
+    btfmrf_render::frame::check_size(u32::try_from(cols)?, u32::try_from(rows)?)?;
     let model = format::read(&args.model)?;
     let mut meshes = vec![args.mesh.clone()];
     for kind in [
@@ -80,7 +81,7 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
         ViewerOptions {
             width: cols as u32,
             height: rows as u32,
-            texture_size: n.max(1 << model.levels().max(1).saturating_sub(1)),
+            tile: args.tile,
             seed: args.seed,
             meshes,
             mapping: args.mapping,

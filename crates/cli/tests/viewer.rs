@@ -82,7 +82,7 @@ fn the_viewer_renders_frames_and_saves_a_screenshot_under_xvfb() {
             model.to_str().unwrap(),
             "--size",
             "200x150",
-            "--texture-size",
+            "--tile",
             "64",
             "--frames",
             "3",

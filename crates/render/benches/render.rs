@@ -9,7 +9,8 @@ use std::path::Path;
 use btfmrf::btf::Direction;
 use btfmrf::model::format;
 use btfmrf::synthesis::SynthesisOptions;
-use btfmrf_render::pipeline::{GpuMaterial, GpuMesh, MaterialTables};
+use btfmrf_render::mrf::{GpuMaterial, MaterialTables};
+use btfmrf_render::pipeline::GpuMesh;
 use btfmrf_render::{Camera, Light, Mapping, MeshKind, Renderer, Scene};
 use criterion::{Criterion, criterion_group, criterion_main};
 
@@ -43,7 +44,7 @@ fn frames(c: &mut Criterion) {
     let heights = model.range_heights(n, n, 1);
     let material = GpuMaterial::new(
         &renderer.ctx,
-        &renderer.pipelines,
+        &renderer.mrf,
         &cache,
         heights.as_ref(),
         &tables,

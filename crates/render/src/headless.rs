@@ -1,17 +1,20 @@
-//! Offscreen rendering to linear RGB images, and the whole "model -> picture" job.
+//! Offscreen rendering to linear RGB images, and the whole "model -> picture" job per
+//! [`Material`]: what each costs is reported per material ([`MrfStats`], [`LpcaStats`]).
 
 use std::time::Instant;
 
 use ndarray::Array3;
 
-use super::lpca::GpuLpca;
+use super::frame::{TARGET_FORMAT, check_size, render_offscreen};
+use super::lpca::{GpuLpca, LpcaPass};
 use super::lut::DirectionLut;
 use super::mesh::Mesh;
-use super::pipeline::{DEPTH_FORMAT, GpuMaterial, GpuMesh, MaterialTables, Pipelines};
+use super::mrf::{GpuMaterial, MaterialTables, MrfPass};
+use super::pipeline::GpuMesh;
 use super::plan::{ScenePlan, plan_scene};
 use super::scene::Scene;
-use super::{GpuContext, MAX_RENDER_SIDE, Mapping, RenderError, Result};
-use btfmrf::lpca::LpcaModel;
+use super::{GpuContext, Mapping, Material, RenderError, Result, check_tile};
+use btfmrf::lpca::{LpcaModel, Method};
 use btfmrf::model::MaterialModel;
 use btfmrf::synthesis::{SynthesisCache, SynthesisOptions};
 use rayon::prelude::*;
@@ -19,23 +22,44 @@ use rayon::prelude::*;
 /// The coarsest texture side the footprint may choose, texels.
 const MIN_TEXTURE_SIDE: usize = 16;
 
-/// The colour format of offscreen targets: linear float, read back exactly.
-pub const TARGET_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
-
-/// A device and the pipelines for offscreen targets.
+/// A device and each material's pass for offscreen targets ([`TARGET_FORMAT`]).
 #[derive(Debug)]
 pub struct Renderer {
     /// The device.
     pub ctx: GpuContext,
-    /// The pipelines (for [`TARGET_FORMAT`]).
-    pub pipelines: Pipelines,
+    /// The MRF pass (one pipeline per [`Mapping`]).
+    pub mrf: MrfPass,
+    /// The LPCA pass.
+    pub lpca: LpcaPass,
 }
 
-/// A rendered picture and what it cost.
+/// A rendered picture and what it cost; `S` is the material's own account.
 #[derive(Debug, Clone)]
-pub struct RenderOutput {
+pub struct RenderOutput<S = RenderStats> {
     /// Linear RGB, planar (3, height, width).
     pub image: Array3<f32>,
+    /// What the material did for this frame.
+    pub stats: S,
+    /// Seconds spent uploading, rendering and reading back the frame.
+    pub render_seconds: f64,
+    /// The adapter, e.g. "llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)".
+    pub adapter: String,
+}
+
+impl<S> RenderOutput<S> {
+    fn map_stats<T>(self, f: impl FnOnce(S) -> T) -> RenderOutput<T> {
+        RenderOutput {
+            image: self.image,
+            stats: f(self.stats),
+            render_seconds: self.render_seconds,
+            adapter: self.adapter,
+        }
+    }
+}
+
+/// What an MRF frame synthesized.
+#[derive(Debug, Clone)]
+pub struct MrfStats {
     /// The plan: clusters synthesized and texture side on the GPU.
     pub plan: ScenePlan,
     /// Side of the synthesized tile, measured texels (one texture repetition).
@@ -49,10 +73,26 @@ pub struct RenderOutput {
     pub texels_synthesized: u64,
     /// Seconds spent synthesizing subspace images and range map.
     pub synthesis_seconds: f64,
-    /// Seconds spent uploading, rendering and reading back the frame.
-    pub render_seconds: f64,
-    /// The adapter, e.g. "llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)".
-    pub adapter: String,
+}
+
+/// What an LPCA frame decoded from (nothing is synthesized).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LpcaStats {
+    /// LPCA or PCA RF.
+    pub method: Method,
+    /// Clusters of the model (PCA RF: one per view).
+    pub clusters: usize,
+    /// The measured tile that repeats on the mesh, texels (width, height).
+    pub size: (usize, usize),
+}
+
+/// The account of a frame of either material ([`Renderer::render_material`]).
+#[derive(Debug, Clone)]
+pub enum RenderStats {
+    /// See [`MrfStats`].
+    Mrf(MrfStats),
+    /// See [`LpcaStats`].
+    Lpca(LpcaStats),
 }
 
 /// Options of [`Renderer::render_model`].
@@ -90,133 +130,63 @@ impl Default for ModelRenderOptions {
     }
 }
 
-/// Records one frame into `encoder`: clears colour (black) and depth, then `draw`s.
-pub fn encode_frame(
-    encoder: &mut wgpu::CommandEncoder,
-    colour: &wgpu::TextureView,
-    depth: &wgpu::TextureView,
-    draw: impl FnOnce(&mut wgpu::RenderPass<'_>),
-) {
-    let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-        label: Some("frame"),
-        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-            view: colour,
-            depth_slice: None,
-            resolve_target: None,
-            ops: wgpu::Operations {
-                load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                store: wgpu::StoreOp::Store,
-            },
-        })],
-        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-            view: depth,
-            depth_ops: Some(wgpu::Operations {
-                load: wgpu::LoadOp::Clear(1.0),
-                store: wgpu::StoreOp::Discard,
-            }),
-            stencil_ops: None,
-        }),
-        timestamp_writes: None,
-        occlusion_query_set: None,
-        multiview_mask: None,
-    });
-    draw(&mut pass);
+/// One MRF frame to draw, with its direction tables and the time its job started.
+struct MrfJob<'a> {
+    model: &'a MaterialModel,
+    mesh: &'a Mesh,
+    scene: &'a Scene,
+    mapping: Mapping,
+    luts: (DirectionLut, DirectionLut),
+    start: Instant,
 }
 
-/// Copies a 2D texture (usage `COPY_SRC`, `bytes_per_pixel` per texel) to the CPU: rows
-/// without padding, top row first. Waits for the GPU.
-///
-/// # Errors
-/// A device error.
-pub fn read_texture(
-    ctx: &GpuContext,
-    texture: &wgpu::Texture,
-    bytes_per_pixel: u32,
-) -> Result<Vec<u8>> {
-    let (w, h) = (texture.width(), texture.height());
-    let row_bytes = w * bytes_per_pixel;
-    let padded = row_bytes.div_ceil(256) * 256;
-    let readback = ctx.checked("readback buffer", || {
-        ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size: u64::from(padded) * u64::from(h),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
+impl<'a> MrfJob<'a> {
+    fn new(
+        model: &'a MaterialModel,
+        mesh: &'a Mesh,
+        scene: &'a Scene,
+        mapping: Mapping,
+    ) -> Result<Self> {
+        check_size(scene.width, scene.height)?;
+        let start = Instant::now();
+        Ok(Self {
+            model,
+            mesh,
+            scene,
+            mapping,
+            luts: (
+                DirectionLut::new(&model.views)?,
+                DirectionLut::new(&model.lights)?,
+            ),
+            start,
         })
-    })?;
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
-    encoder.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo {
-            texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        wgpu::TexelCopyBufferInfo {
-            buffer: &readback,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(padded),
-                rows_per_image: Some(h),
-            },
-        },
-        wgpu::Extent3d {
-            width: w,
-            height: h,
-            depth_or_array_layers: 1,
-        },
-    );
-    ctx.queue.submit([encoder.finish()]);
-    let slice = readback.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    let device_error = |e: String| RenderError::Device(e);
-    ctx.device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| device_error(e.to_string()))?;
-    rx.recv()
-        .map_err(|e| device_error(e.to_string()))?
-        .map_err(|e| device_error(e.to_string()))?;
-    let data = slice
-        .get_mapped_range()
-        .map_err(|e| device_error(e.to_string()))?;
-    let mut out = Vec::with_capacity((row_bytes * h) as usize);
-    for y in 0..h as usize {
-        out.extend_from_slice(&data[y * padded as usize..y * padded as usize + row_bytes as usize]);
     }
-    drop(data);
-    readback.unmap();
-    Ok(out)
-}
 
-/// Checks an image size.
-///
-/// # Errors
-/// A side of zero or beyond [`MAX_RENDER_SIDE`].
-pub fn check_size(width: u32, height: u32) -> Result<()> {
-    if width == 0 || height == 0 || width > MAX_RENDER_SIDE || height > MAX_RENDER_SIDE {
-        return Err(RenderError::parameter(
-            "--size",
-            format!("{width}x{height} is outside 1..={MAX_RENDER_SIDE} pixels a side"),
-        ));
+    fn plan(&self, sizes: (usize, usize)) -> ScenePlan {
+        plan_scene(
+            self.model,
+            self.mesh,
+            self.scene,
+            (&self.luts.0, &self.luts.1),
+            sizes,
+        )
     }
-    Ok(())
 }
 
 impl Renderer {
-    /// A headless device and its pipelines.
+    /// A headless device and every material's pass.
     ///
     /// # Errors
     /// No adapter, or a device or shader error.
     pub fn new() -> Result<Self> {
         let ctx = GpuContext::headless()?;
-        let pipelines = Pipelines::new(&ctx, TARGET_FORMAT)?;
-        Ok(Self { ctx, pipelines })
+        let mrf = MrfPass::new(&ctx, TARGET_FORMAT)?;
+        let lpca = LpcaPass::new(&ctx, TARGET_FORMAT)?;
+        Ok(Self { ctx, mrf, lpca })
     }
 
-    /// Renders `mesh` with `material` to a linear RGB image (black background).
+    /// Renders `mesh` with an MRF `material` by `mapping` to a linear RGB image (black
+    /// background).
     ///
     /// # Errors
     /// An invalid size or a device error.
@@ -227,15 +197,10 @@ impl Renderer {
         scene: &Scene,
         mapping: Mapping,
     ) -> Result<Array3<f32>> {
-        if mapping == Mapping::Lpca {
-            return Err(RenderError::Unsupported(
-                "the lpca pipeline renders LPCA models (Renderer::render_lpca)".into(),
-            ));
-        }
         check_size(scene.width, scene.height)?;
-        material.set_frame(&self.ctx, scene, mesh, 0);
-        self.render_frame(scene, |pass| {
-            self.pipelines.draw(pass, mapping, material, mesh)
+        material.set_frame(&self.ctx, scene, mesh);
+        render_offscreen(&self.ctx, (scene.width, scene.height), |pass| {
+            self.mrf.draw(pass, mapping, material, mesh)
         })
     }
 
@@ -250,13 +215,36 @@ impl Renderer {
         scene: &Scene,
     ) -> Result<Array3<f32>> {
         check_size(scene.width, scene.height)?;
-        model.set_frame(&self.ctx, scene, mesh);
-        self.render_frame(scene, |pass| self.pipelines.draw_lpca(pass, model, mesh))
+        model.set_frame(&self.ctx, scene);
+        render_offscreen(&self.ctx, (scene.width, scene.height), |pass| {
+            self.lpca.draw(pass, model, mesh)
+        })
+    }
+
+    /// The whole job for either material: [`Renderer::render_model`] or
+    /// [`Renderer::render_lpca`].
+    ///
+    /// # Errors
+    /// As theirs.
+    pub fn render_material(
+        &self,
+        material: Material<'_>,
+        mesh: &Mesh,
+        scene: &Scene,
+    ) -> Result<RenderOutput> {
+        Ok(match material {
+            Material::Mrf(model, options) => self
+                .render_model(model, mesh, scene, &options)?
+                .map_stats(RenderStats::Mrf),
+            Material::Lpca(model) => self
+                .render_lpca(model, mesh, scene)?
+                .map_stats(RenderStats::Lpca),
+        })
     }
 
     /// The whole LPCA job: uploads `model` (cluster indices, weights, eigen-ABRDFs and the
     /// direction tables) and renders one frame, every fragment decoding its texel. Nothing is
-    /// synthesized; the plan lists all clusters and the model's width as texture size.
+    /// synthesized.
     ///
     /// # Errors
     /// An invalid size, a PCA BTF model, a model beyond the device's limits or a device error.
@@ -265,86 +253,29 @@ impl Renderer {
         model: &LpcaModel,
         mesh: &Mesh,
         scene: &Scene,
-    ) -> Result<RenderOutput> {
+    ) -> Result<RenderOutput<LpcaStats>> {
         check_size(scene.width, scene.height)?;
         let start = Instant::now();
         let luts = (
             DirectionLut::new(model.views())?,
             DirectionLut::new(model.lights())?,
         );
-        let gpu = GpuLpca::new(&self.ctx, &self.pipelines, model, &luts)?;
+        let gpu = GpuLpca::new(&self.ctx, &self.lpca, model, (&luts.0, &luts.1))?;
         let gpu_mesh = GpuMesh::new(&self.ctx, mesh);
         let image = self.render_gpu_lpca(&gpu, &gpu_mesh, scene)?;
         Ok(RenderOutput {
             image,
-            plan: ScenePlan {
-                clusters: (0..model.clusters()).collect(),
-                texture_size: model.width(),
+            stats: LpcaStats {
+                method: model.method(),
+                clusters: model.clusters(),
+                size: (model.width(), model.height()),
             },
-            tile: model.width(),
-            subspaces_total: 0,
-            subspaces_synthesized: 0,
-            texels_synthesized: 0,
-            synthesis_seconds: 0.0,
             render_seconds: start.elapsed().as_secs_f64(),
             adapter: self.ctx.describe(),
         })
     }
 
-    /// Renders one frame whose uniforms are written already: clears, `draw`s, reads back.
-    fn render_frame(
-        &self,
-        scene: &Scene,
-        draw: impl FnOnce(&mut wgpu::RenderPass<'_>),
-    ) -> Result<Array3<f32>> {
-        let device = &self.ctx.device;
-        let (w, h) = (scene.width, scene.height);
-        let extent = wgpu::Extent3d {
-            width: w,
-            height: h,
-            depth_or_array_layers: 1,
-        };
-        let target = |format, usage| {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("target"),
-                size: extent,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
-        };
-        let colour = self.ctx.checked("render target", || {
-            target(
-                TARGET_FORMAT,
-                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            )
-        })?;
-        let depth = target(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
-        let colour_view = colour.create_view(&Default::default());
-        let depth_view = depth.create_view(&Default::default());
-        let mut encoder = device.create_command_encoder(&Default::default());
-        encode_frame(&mut encoder, &colour_view, &depth_view, draw);
-        self.ctx.queue.submit([encoder.finish()]);
-        let data = read_texture(&self.ctx, &colour, 16)?;
-        let row_bytes = w as usize * 16;
-        let mut image = Array3::<f32>::zeros((3, h as usize, w as usize));
-        for y in 0..h as usize {
-            let row = &data[y * row_bytes..(y + 1) * row_bytes];
-            for x in 0..w as usize {
-                for c in 0..3 {
-                    let at = 16 * x + 4 * c;
-                    image[[c, y, x]] =
-                        f32::from_le_bytes([row[at], row[at + 1], row[at + 2], row[at + 3]]);
-                }
-            }
-        }
-        Ok(image)
-    }
-
-    /// The whole job: plans the scene, synthesizes exactly the subspace images it needs
+    /// The whole MRF job: plans the scene, synthesizes exactly the subspace images it needs
     /// (tileable, at the tile's side), uploads them at the planned resolution and renders
     /// one frame.
     ///
@@ -356,45 +287,24 @@ impl Renderer {
         mesh: &Mesh,
         scene: &Scene,
         options: &ModelRenderOptions,
-    ) -> Result<RenderOutput> {
-        check_size(scene.width, scene.height)?;
-        if options.mapping == Mapping::Lpca {
-            return Err(RenderError::Unsupported(
-                "--mapping lpca renders .lpca models only; an MRF model (.btfm) renders with \
-                 bump, displacement or plain"
-                    .into(),
-            ));
-        }
-        let start = Instant::now();
-        let luts = (
-            DirectionLut::new(&model.views)?,
-            DirectionLut::new(&model.lights)?,
-        );
-        let min_side = model.min_synthesis_side().max(32);
+    ) -> Result<RenderOutput<MrfStats>> {
+        let job = MrfJob::new(model, mesh, scene, options.mapping)?;
         let tile = options.tile;
-        if !tile.is_power_of_two() || !(min_side..=MAX_RENDER_SIDE as usize).contains(&tile) {
-            return Err(RenderError::parameter(
-                "--tile",
-                format!("{tile} is not a power of two within {min_side}..={MAX_RENDER_SIDE}"),
-            ));
-        }
+        check_tile(model, tile)?;
         // The footprint picks how finely the tile is sampled, never more finely than the
         // tile's own texels.
-        let mut plan = plan_scene(
-            model,
-            mesh,
-            scene,
-            (&luts.0, &luts.1),
-            (
-                MIN_TEXTURE_SIDE.min(tile),
-                options.max_texture_size.min(tile),
-            ),
-        );
+        let mut plan = job.plan((
+            MIN_TEXTURE_SIDE.min(tile),
+            options.max_texture_size.min(tile),
+        ));
         if let Some(side) = options.texture_size {
-            if side == 0 || !side.is_power_of_two() || side > MAX_RENDER_SIDE as usize {
+            if side == 0 || !side.is_power_of_two() || side > super::MAX_RENDER_SIDE as usize {
                 return Err(RenderError::parameter(
                     "--texture-size",
-                    format!("{side} is not a power of two within 1..={MAX_RENDER_SIDE}"),
+                    format!(
+                        "{side} is not a power of two within 1..={}",
+                        super::MAX_RENDER_SIDE
+                    ),
                 ));
             }
             plan.texture_size = side.min(tile);
@@ -407,17 +317,7 @@ impl Renderer {
         };
         let cache = model.synthesis_cache_for(&plan.clusters, &synthesis)?;
         let synthesized = plan.clusters.len();
-        self.finish(
-            model,
-            &cache,
-            luts,
-            plan,
-            synthesized,
-            mesh,
-            scene,
-            options.mapping,
-            start,
-        )
+        self.finish(job, &cache, plan, synthesized)
     }
 
     /// As [`Renderer::render_model`], drawing on (and adding to) `cache`, whose size, seed and
@@ -434,13 +334,8 @@ impl Renderer {
         mesh: &Mesh,
         scene: &Scene,
         mapping: Mapping,
-    ) -> Result<RenderOutput> {
-        check_size(scene.width, scene.height)?;
-        let start = Instant::now();
-        let luts = (
-            DirectionLut::new(&model.views)?,
-            DirectionLut::new(&model.lights)?,
-        );
+    ) -> Result<RenderOutput<MrfStats>> {
+        let job = MrfJob::new(model, mesh, scene, mapping)?;
         let size = cache.options().rows;
         if cache.options().cols != size {
             return Err(RenderError::parameter(
@@ -448,7 +343,7 @@ impl Renderer {
                 format!("{}x{size} is not square", cache.options().cols),
             ));
         }
-        let mut plan = plan_scene(model, mesh, scene, (&luts.0, &luts.1), (size, size));
+        let mut plan = job.plan((size, size));
         plan.texture_size = size;
         let missing: Vec<usize> = plan
             .clusters
@@ -459,56 +354,42 @@ impl Renderer {
         missing
             .par_iter()
             .try_for_each(|&k| model.subspace_from_cache(cache, k).map(|_| ()))?;
-        self.finish(
-            model,
-            cache,
-            luts,
-            plan,
-            missing.len(),
-            mesh,
-            scene,
-            mapping,
-            start,
-        )
+        self.finish(job, cache, plan, missing.len())
     }
 
-    /// Uploads what `cache` holds and renders the frame.
-    #[allow(clippy::too_many_arguments)]
+    /// Uploads what `cache` holds (`synthesized` of its subspace images new for this frame)
+    /// and renders `job`'s frame.
     fn finish(
         &self,
-        model: &MaterialModel,
+        job: MrfJob<'_>,
         cache: &SynthesisCache,
-        luts: (DirectionLut, DirectionLut),
         plan: ScenePlan,
         synthesized: usize,
-        mesh: &Mesh,
-        scene: &Scene,
-        mapping: Mapping,
-        start: Instant,
-    ) -> Result<RenderOutput> {
+    ) -> Result<RenderOutput<MrfStats>> {
         let (rows, cols) = (cache.options().rows, cache.options().cols);
-        let heights = match mapping {
+        let model = job.model;
+        let heights = match job.mapping {
             Mapping::Displacement => model.range_heights(rows, cols, cache.options().seed),
-            _ => None,
+            Mapping::Bump | Mapping::Plain => None,
         };
         let tables =
-            MaterialTables::new(model, cache, Some(luts))?.at_resolution(plan.texture_size)?;
-        let synthesis_seconds = start.elapsed().as_secs_f64();
+            MaterialTables::new(model, cache, Some(job.luts))?.at_resolution(plan.texture_size)?;
+        let synthesis_seconds = job.start.elapsed().as_secs_f64();
         let start = Instant::now();
-        let material =
-            GpuMaterial::new(&self.ctx, &self.pipelines, cache, heights.as_ref(), &tables)?;
-        let gpu_mesh = GpuMesh::new(&self.ctx, mesh);
-        let image = self.render(&material, &gpu_mesh, scene, mapping)?;
-        let render_seconds = start.elapsed().as_secs_f64();
+        let material = GpuMaterial::new(&self.ctx, &self.mrf, cache, heights.as_ref(), &tables)?;
+        let gpu_mesh = GpuMesh::new(&self.ctx, job.mesh);
+        let image = self.render(&material, &gpu_mesh, job.scene, job.mapping)?;
         Ok(RenderOutput {
             image,
-            subspaces_synthesized: synthesized,
-            texels_synthesized: (synthesized * rows * cols) as u64,
-            plan,
-            tile: rows,
-            subspaces_total: model.subspaces.len(),
-            synthesis_seconds,
-            render_seconds,
+            stats: MrfStats {
+                subspaces_synthesized: synthesized,
+                texels_synthesized: (synthesized * rows * cols) as u64,
+                plan,
+                tile: rows,
+                subspaces_total: model.subspaces.len(),
+                synthesis_seconds,
+            },
+            render_seconds: start.elapsed().as_secs_f64(),
             adapter: self.ctx.describe(),
         })
     }

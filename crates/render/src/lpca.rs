@@ -1,12 +1,14 @@
-//! An LPCA model on the GPU: the decoding layout of Müller, Meseth and Klein (2003), with
-//! buffers instead of textures (exact f32 copies of the model's half-float numbers).
+//! The LPCA material on the GPU: the decoding layout of Müller, Meseth and Klein (2003), with
+//! buffers instead of textures (exact f32 copies of the model's half-float numbers), and the
+//! pass that draws it.
 //!
 //! Per texel its cluster and `C` weights; per (cluster, measured view x light pair) the
 //! cluster mean and `C` eigen-ABRDF values, RGB. The fragment shader (`shaders/lpca.wgsl`)
 //! picks the texel nearest to the fragment's texture coordinates (the measured tile repeats)
 //! and rebuilds its 3 x 3 nearest measured pairs exactly like
 //! [`LpcaModel::reconstruct`](btfmrf::lpca::LpcaModel::reconstruct), blending them with the
-//! barycentric weights of the direction tables ([`super::lut`]) that the MRF pipelines use.
+//! barycentric weights of the direction tables ([`super::lut`]) that the MRF pass uses. The
+//! mesh is drawn as it is: an LPCA model has no range map to bump or displace it by.
 //!
 //! PCA RF models (one factorization per view, one cluster each) fit the same layout with the
 //! view in place of the cluster; PCA BTF models (eigen-textures) do not and are refused.
@@ -14,10 +16,28 @@
 use wgpu::util::DeviceExt;
 
 use super::lut::DirectionLut;
-use super::pipeline::{Globals, GpuMesh, Pipelines};
+use super::pipeline::{
+    COMMON_WGSL, CommonBuffers, GpuMesh, bind_group_layout, common_layout_entries, render_pipeline,
+    storage_buffer, storage_entry, uniform_entry,
+};
 use super::scene::Scene;
 use super::{GpuContext, RenderError, Result};
 use btfmrf::lpca::{LpcaModel, Method};
+
+const LPCA_WGSL: &str = include_str!("../../../shaders/lpca.wgsl");
+
+/// The WGSL source of the LPCA pipeline: `common.wgsl`, then `lpca.wgsl`.
+pub fn shader_source() -> String {
+    format!("{COMMON_WGSL}\n{LPCA_WGSL}")
+}
+
+/// Where row `row` (0: the mean, `1..=components`: the eigen-ABRDFs) of measured pair `pair`
+/// of `group` (cluster, or view for PCA RF) sits in [`LpcaTables::eigen`], for `pairs` pairs
+/// per group: `(group * pairs + pair) * (components + 1) + row`. The shader's `eigen_slot` in
+/// `lpca.wgsl` is the same formula.
+pub fn eigen_slot(group: usize, pair: usize, row: usize, pairs: usize, components: usize) -> usize {
+    (group * pairs + pair) * (components + 1) + row
+}
 
 /// The CPU side of [`GpuLpca`]: what it uploads.
 #[derive(Debug, Clone)]
@@ -32,7 +52,7 @@ pub struct LpcaTables {
     pub texel_cluster: Vec<u32>,
     /// `C` weights per texel (LPCA) or per (view, texel) (PCA RF).
     pub texel_weights: Vec<f32>,
-    /// Per (group, pair, 0..=C): mean then eigen-ABRDF values as RGBA (A = 0).
+    /// Means and eigen-ABRDF values as RGBA (A = 0), at [`eigen_slot`].
     pub eigen: Vec<[f32; 4]>,
     /// Measured views and lights.
     pub counts: (usize, usize),
@@ -61,6 +81,7 @@ impl LpcaTables {
         let pairs = if per_view { nl } else { nv * nl };
         let mut eigen = Vec::new();
         let mut texel_weights = Vec::new();
+        let mut group0 = 0;
         for f in model.parts() {
             let d = f.dim;
             if d != pairs * 3 || f.components != c || f.items() != n {
@@ -69,18 +90,24 @@ impl LpcaTables {
                     model.method().name()
                 )));
             }
-            for k in 0..f.clusters() {
-                for p in 0..pairs {
-                    let at = |v: &[f32], row: usize| {
-                        let o = row * d + 3 * p;
-                        [v[o], v[o + 1], v[o + 2], 0.0]
-                    };
-                    eigen.push(at(&f.means, k));
-                    for t in 0..c {
-                        eigen.push(at(&f.bases, k * c + t));
+            let groups = f.clusters();
+            eigen.resize((group0 + groups) * pairs * (c + 1), [0.0; 4]);
+            for k in 0..groups {
+                // Row r of cluster k: its mean (r = 0) or its eigen-ABRDF r - 1, each a
+                // vector of `d` values, RGB per pair.
+                let vector = |r: usize| match r {
+                    0 => &f.means[k * d..(k + 1) * d],
+                    _ => &f.bases[(k * c + r - 1) * d..(k * c + r) * d],
+                };
+                for r in 0..=c {
+                    let v = vector(r);
+                    for p in 0..pairs {
+                        eigen[eigen_slot(group0 + k, p, r, pairs, c)] =
+                            [v[3 * p], v[3 * p + 1], v[3 * p + 2], 0.0];
                     }
                 }
             }
+            group0 += groups;
             texel_weights.extend_from_slice(&f.weights);
         }
         let texel_cluster = if per_view {
@@ -107,26 +134,24 @@ impl LpcaTables {
     }
 }
 
-/// An LPCA (or PCA RF) model's buffers and uniforms on the GPU, one bind group.
+/// An LPCA (or PCA RF) model's buffers and uniforms on the GPU, bound as group 0 of
+/// [`LpcaPass`].
 #[derive(Debug)]
 pub struct GpuLpca {
-    uniforms: wgpu::Buffer,
-    pub(crate) bind_group: wgpu::BindGroup,
-    counts: (usize, usize),
-    /// Texture width, texels (scales nothing; reported).
-    pub width: usize,
+    common: CommonBuffers,
+    bind_group: wgpu::BindGroup,
 }
 
 impl GpuLpca {
-    /// Uploads `model` with its direction tables `luts` (views, lights).
+    /// Uploads `model` with its direction tables `luts` (views, lights), for `pass`.
     ///
     /// # Errors
     /// A PCA BTF model, or a buffer beyond the device's limits.
     pub fn new(
         ctx: &GpuContext,
-        pipelines: &Pipelines,
+        pass: &LpcaPass,
         model: &LpcaModel,
-        luts: &(DirectionLut, DirectionLut),
+        luts: (&DirectionLut, &DirectionLut),
     ) -> Result<Self> {
         let tables = LpcaTables::new(model)?;
         let device = &ctx.device;
@@ -144,33 +169,16 @@ impl GpuLpca {
                 )));
             }
         }
-        let storage = |label, bytes: &[u8]| {
-            ctx.checked(label, || {
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some(label),
-                    contents: bytes,
-                    usage: wgpu::BufferUsages::STORAGE,
-                })
-            })
-        };
+        let common = CommonBuffers::new(ctx, luts)?;
         let buffers = [
-            storage("view cells", bytemuck::cast_slice(&luts.0.cells))?,
-            storage("light cells", bytemuck::cast_slice(&luts.1.cells))?,
-            storage("view points", bytemuck::cast_slice(&luts.0.points))?,
-            storage("light points", bytemuck::cast_slice(&luts.1.points))?,
-            storage(
+            storage_buffer(
+                ctx,
                 "texel clusters",
                 bytemuck::cast_slice(&tables.texel_cluster),
             )?,
-            storage("texel weights", weight_bytes)?,
-            storage("eigen-ABRDFs", eigen_bytes)?,
+            storage_buffer(ctx, "texel weights", weight_bytes)?,
+            storage_buffer(ctx, "eigen-ABRDFs", eigen_bytes)?,
         ];
-        let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("globals"),
-            size: std::mem::size_of::<Globals>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
         let info: [u32; 4] = [
             tables.size.0 as u32,
             tables.size.1 as u32,
@@ -182,17 +190,12 @@ impl GpuLpca {
             contents: bytemuck::bytes_of(&info),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let mut entries = vec![
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: uniforms.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 10,
-                resource: info.as_entire_binding(),
-            },
-        ];
-        for (b, binding) in buffers.iter().zip([4, 5, 6, 7, 11, 12, 13]) {
+        let mut entries = common.entries();
+        entries.push(wgpu::BindGroupEntry {
+            binding: 10,
+            resource: info.as_entire_binding(),
+        });
+        for (b, binding) in buffers.iter().zip(11..) {
             entries.push(wgpu::BindGroupEntry {
                 binding,
                 resource: b.as_entire_binding(),
@@ -201,28 +204,66 @@ impl GpuLpca {
         let bind_group = ctx.checked("lpca bind group", || {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("lpca model"),
-                layout: &pipelines.lpca_layout,
+                layout: &pass.layout,
                 entries: &entries,
             })
         })?;
-        Ok(Self {
-            uniforms,
-            bind_group,
-            counts: tables.counts,
-            width: tables.size.0,
-        })
+        Ok(Self { common, bind_group })
     }
 
-    /// Writes the uniforms of one frame (the point-light falloff as in the MRF pipelines).
-    pub fn set_frame(&self, ctx: &GpuContext, scene: &Scene, _mesh: &GpuMesh) {
-        let globals = Globals {
-            view_proj: scene.camera.view_proj(scene.aspect()),
-            camera: scene.camera.to_vec4(),
-            light: scene.light.to_vec4(),
-            params: [scene.light.distance.map_or(1.0, |d| d * d), 0.0, 0.0, 0.0],
-            counts: [self.counts.0 as u32, self.counts.1 as u32, 0, 0],
-        };
-        ctx.queue
-            .write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&globals));
+    /// Writes the uniforms of one frame (the point-light falloff as in the MRF pass).
+    pub fn set_frame(&self, ctx: &GpuContext, scene: &Scene) {
+        self.common.write(ctx, scene, [0.0; 3]);
+    }
+}
+
+/// The LPCA material's bind group layout and pipeline, for one colour format.
+#[derive(Debug)]
+pub struct LpcaPass {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::RenderPipeline,
+}
+
+impl LpcaPass {
+    /// Compiles the pipeline for colour targets of `format`.
+    ///
+    /// # Errors
+    /// A shader or pipeline the device rejects.
+    pub fn new(ctx: &GpuContext, format: wgpu::TextureFormat) -> Result<Self> {
+        let mut entries = common_layout_entries().to_vec();
+        entries.extend([
+            uniform_entry(10, wgpu::ShaderStages::VERTEX_FRAGMENT),
+            storage_entry(11),
+            storage_entry(12),
+            storage_entry(13),
+        ]);
+        let layout = bind_group_layout(ctx, "lpca model", &entries);
+        let pipeline = render_pipeline(ctx, "lpca", &layout, shader_source(), format)?;
+        Ok(Self { layout, pipeline })
+    }
+
+    /// Records one draw of `mesh` with `model` into `pass`.
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, model: &GpuLpca, mesh: &GpuMesh) {
+        mesh.draw(pass, &self.pipeline, &model.bind_group);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn eigen_slots_are_dense_and_in_group_pair_row_order() {
+        let (groups, pairs, c) = (3, 5, 2);
+        let mut next = 0;
+        for g in 0..groups {
+            for p in 0..pairs {
+                for r in 0..=c {
+                    assert_eq!(eigen_slot(g, p, r, pairs, c), next);
+                    next += 1;
+                }
+            }
+        }
+        assert_eq!(next, groups * pairs * (c + 1));
     }
 }

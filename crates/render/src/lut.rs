@@ -31,10 +31,10 @@ pub const SHADING_SAMPLES: usize = 128 * 128;
 
 const HALF_PI: f64 = std::f64::consts::FRAC_PI_2;
 
-/// Projected coordinates of a unit vector in the tangent frame, theta clamped to 90 degrees
-/// (the shader's `project_dir`).
-pub fn project_vector(v: [f64; 3]) -> [f64; 2] {
-    let theta = v[2].clamp(-1.0, 1.0).acos().min(HALF_PI);
+/// Projected coordinates of a unit vector in the tangent frame, theta clamped to `max_theta`
+/// radians (the shader's `project_dir`).
+pub fn project_vector(v: [f64; 3], max_theta: f64) -> [f64; 2] {
+    let theta = v[2].clamp(-1.0, 1.0).acos().min(max_theta);
     let r = (v[0] * v[0] + v[1] * v[1]).sqrt();
     if r < 1e-12 {
         [0.0, 0.0]
@@ -50,6 +50,9 @@ pub struct DirectionLut {
     pub points: Vec<[f32; 2]>,
     /// Per cell (row-major, row = y), the triangle's three direction indices and a zero.
     pub cells: Vec<[u32; 4]>,
+    /// Where queries are clamped, radians: 90 degrees, or the set's lowest direction if that
+    /// lies below the horizon (real RTI domes), as [`DirectionSet::interpolate`] does.
+    pub max_theta: f64,
 }
 
 impl DirectionLut {
@@ -59,25 +62,45 @@ impl DirectionLut {
     /// Never for a valid set (interpolation of finite directions does not fail).
     pub fn new(set: &DirectionSet) -> Result<Self> {
         let points = set.iter().map(|d| project(d).map(|x| x as f32)).collect();
+        let max_theta = set
+            .iter()
+            .map(|d| d.theta_deg)
+            .fold(90.0, f64::max)
+            .to_radians();
         let n = DIRECTION_GRID;
         let cells = (0..n * n)
             .into_par_iter()
             .map(|i| {
                 let c = cell_centre(i % n, i / n);
                 let r = (c[0] * c[0] + c[1] * c[1]).sqrt();
-                let d = Direction::new(r.min(HALF_PI).to_degrees(), c[1].atan2(c[0]).to_degrees());
+                let d =
+                    Direction::new(r.min(max_theta).to_degrees(), c[1].atan2(c[0]).to_degrees());
                 let w = set.interpolate(&d)?;
                 Ok([w[0].index as u32, w[1].index as u32, w[2].index as u32, 0])
             })
             .collect::<Result<Vec<_>, btfmrf::btf::BtfError>>()
             .map_err(btfmrf::model::ModelError::from)?;
-        Ok(Self { points, cells })
+        Ok(Self {
+            points,
+            cells,
+            max_theta,
+        })
+    }
+
+    /// The tangent-frame `z` at and below which a direction lies beyond the set's lowest
+    /// direction: 0 (the horizon) unless the set reaches below it.
+    pub fn horizon_z(&self) -> f64 {
+        if self.max_theta > HALF_PI {
+            self.max_theta.cos()
+        } else {
+            0.0
+        }
     }
 
     /// The CPU mirror of the shader's `interpolate_dir`: three direction indices and weights
     /// for a unit vector in the tangent frame.
     pub fn lookup(&self, v: [f64; 3]) -> ([usize; 3], [f64; 3]) {
-        let q = project_vector(v);
+        let q = project_vector(v, self.max_theta);
         let n = DIRECTION_GRID as f64;
         let fx = (q[0] + HALF_PI) / std::f64::consts::PI * n - 0.5;
         let fy = (q[1] + HALF_PI) / std::f64::consts::PI * n - 0.5;
@@ -155,7 +178,7 @@ impl MeanShading {
 
     /// The CPU mirror of the shader's `mean_shading`: bilinear between nodes.
     pub fn lookup(&self, l: [f64; 3]) -> f64 {
-        let q = project_vector(l);
+        let q = project_vector(l, HALF_PI);
         let n = SHADING_GRID;
         let f = |c: f64| {
             ((c + HALF_PI) / std::f64::consts::PI * (n - 1) as f64).clamp(0.0, (n - 1) as f64)
@@ -185,6 +208,20 @@ fn node_vector(x: usize, y: usize) -> [f64; 3] {
 mod tests {
     use super::*;
 
+    /// The largest difference between the CPU's interpolation weights of `d` and the
+    /// table's, compared as sparse weight vectors over direction indices.
+    fn weight_difference(set: &DirectionSet, lut: &DirectionLut, d: &Direction) -> f64 {
+        let mut diff = vec![0.0f64; set.len()];
+        for c in set.interpolate(d).unwrap() {
+            diff[c.index] += c.weight;
+        }
+        let (idx, w) = lut.lookup(d.vector());
+        for k in 0..3 {
+            diff[idx[k]] -= w[k];
+        }
+        diff.iter().map(|x| x.abs()).fold(0.0, f64::max)
+    }
+
     #[test]
     fn the_direction_table_reproduces_cpu_interpolation() {
         let set = DirectionSet::bonn();
@@ -193,22 +230,43 @@ mod tests {
         for t in 0..=45 {
             for p in 0..72 {
                 let d = Direction::new(t as f64 * 2.0, p as f64 * 5.0 + 1.3);
-                let cpu = set.interpolate(&d).unwrap();
-                let (idx, w) = lut.lookup(d.vector());
-                // Compare as sparse weight vectors over direction indices.
-                let mut diff = vec![0.0f64; set.len()];
-                for c in cpu {
-                    diff[c.index] += c.weight;
-                }
-                for k in 0..3 {
-                    diff[idx[k]] -= w[k];
-                }
-                worst = worst.max(diff.iter().map(|x| x.abs()).fold(0.0, f64::max));
+                worst = worst.max(weight_difference(&set, &lut, &d));
                 count += 1;
             }
         }
         assert!(count > 3000);
         assert!(worst < 1e-6, "largest weight difference {worst}");
+    }
+
+    #[test]
+    fn a_set_reaching_below_the_horizon_is_clamped_at_its_lowest_direction() {
+        // The Bonn lights with the last ring moved to 95 degrees, as an RTI dome may list.
+        let moved: Vec<Direction> = DirectionSet::bonn()
+            .iter()
+            .map(|d| {
+                let theta = if d.theta_deg > 70.0 {
+                    95.0
+                } else {
+                    d.theta_deg
+                };
+                Direction::new(theta, d.phi_deg)
+            })
+            .collect();
+        let set = DirectionSet::new(moved).unwrap();
+        let lut = DirectionLut::new(&set).unwrap();
+        assert!((lut.max_theta.to_degrees() - 95.0).abs() < 1e-9);
+        assert!(lut.horizon_z() < -0.08);
+        for (theta, phi) in [(92.0, 10.0), (95.0, 200.0), (80.0, 33.0)] {
+            let d = Direction::new(theta, phi);
+            let worst = weight_difference(&set, &lut, &d);
+            assert!(worst < 1e-6, "{d:?}: largest weight difference {worst}");
+        }
+        assert_eq!(
+            DirectionLut::new(&DirectionSet::bonn())
+                .unwrap()
+                .horizon_z(),
+            0.0
+        );
     }
 
     #[test]

@@ -54,6 +54,9 @@ pub struct Mesh {
     pub indices: Vec<u32>,
 }
 
+/// The grid cells a built-in mesh may have along its longest parameter direction.
+pub const DETAIL_RANGE: std::ops::RangeInclusive<u32> = 4..=2048;
+
 /// Which mesh to render.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum MeshKind {
@@ -96,13 +99,25 @@ impl std::fmt::Display for MeshKind {
 
 impl MeshKind {
     /// Builds the mesh. `detail` is the number of grid cells along the longest parameter
-    /// direction (large for displacement mapping); `repeats` how many texture tiles cover the
-    /// unit of length of the built-in shapes (OBJ files keep their own coordinates).
+    /// direction (large for displacement mapping; within [`DETAIL_RANGE`]); `repeats` how
+    /// many texture tiles cover the unit of length of the built-in shapes (OBJ files keep
+    /// their own coordinates and ignore both).
     ///
     /// # Errors
-    /// An OBJ file that is missing, corrupt, empty or without texture coordinates.
+    /// A `detail` outside [`DETAIL_RANGE`]; an OBJ file that is missing, corrupt, empty or
+    /// without texture coordinates.
     pub fn build(&self, detail: u32, repeats: f32) -> Result<Mesh> {
-        let n = detail.clamp(4, 2048);
+        if !DETAIL_RANGE.contains(&detail) {
+            return Err(RenderError::parameter(
+                "--detail",
+                format!(
+                    "{detail} is outside {}..={} grid cells",
+                    DETAIL_RANGE.start(),
+                    DETAIL_RANGE.end()
+                ),
+            ));
+        }
+        let n = detail;
         Ok(match self {
             MeshKind::Sphere => Mesh::sphere((n / 4).max(2), repeats),
             MeshKind::Plane => Mesh::plane(n, repeats),

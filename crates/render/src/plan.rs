@@ -80,7 +80,7 @@ pub fn plan_scene(
             [light[0], light[1], light[2]]
         };
         let l = to_frame(l_world, t, b, n);
-        if v[2] <= 0.0 || l[2] <= 0.0 {
+        if v[2] <= 0.0 || l[2] <= luts.1.horizon_z() {
             return;
         }
         let (vi, vw) = luts.0.lookup(v);

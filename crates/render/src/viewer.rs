@@ -2,7 +2,7 @@
 //! (left drag, wheel), the light on the arrow keys or right drag, `B` / `D` for bump /
 //! displacement mapping, `M` for the next mesh; frame time in the window title.
 //!
-//! The viewer synthesizes every cluster once at start (at [`ViewerOptions::texture_size`]),
+//! The viewer synthesizes every cluster once at start (at [`ViewerOptions::tile`]),
 //! since the camera and light can go anywhere. `--screenshot FILE --frames N` renders N
 //! frames, saves the window's contents and exits (used by the tests under Xvfb).
 
@@ -17,11 +17,12 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
-use super::headless::{encode_frame, read_texture};
+use super::frame::{depth_texture, encode_frame, read_texture};
 use super::mesh::MeshKind;
-use super::pipeline::{DEPTH_FORMAT, GpuMaterial, GpuMesh, MaterialTables, Pipelines};
+use super::mrf::{GpuMaterial, MaterialTables, MrfPass};
+use super::pipeline::GpuMesh;
 use super::scene::{Camera, Light, Scene};
-use super::{GpuContext, Mapping, RenderError, Result};
+use super::{GpuContext, Mapping, RenderError, Result, check_tile};
 use btfmrf::btf::Direction;
 use btfmrf::model::MaterialModel;
 use btfmrf::synthesis::SynthesisOptions;
@@ -33,8 +34,9 @@ pub struct ViewerOptions {
     pub width: u32,
     /// See `width`.
     pub height: u32,
-    /// Side of the synthesized textures.
-    pub texture_size: usize,
+    /// Measured texels per texture repetition, the side of the synthesized textures (checked
+    /// by [`check_tile`], like `render --tile`).
+    pub tile: usize,
     /// Synthesis seed.
     pub seed: u64,
     /// The meshes `M` cycles through; the first is shown first.
@@ -57,7 +59,7 @@ struct Viewer {
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
     ctx: GpuContext,
-    pipelines: Pipelines,
+    pass: MrfPass,
     bump_material: GpuMaterial,
     displaced_material: GpuMaterial,
     meshes: Vec<(GpuMesh, GpuMesh)>,
@@ -79,23 +81,6 @@ struct App<'a> {
     frames: u64,
     last_title: Instant,
     frame_ms: f64,
-}
-
-fn depth_texture(ctx: &GpuContext, w: u32, h: u32) -> wgpu::Texture {
-    ctx.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("depth"),
-        size: wgpu::Extent3d {
-            width: w.max(1),
-            height: h.max(1),
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: DEPTH_FORMAT,
-        usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-        view_formats: &[],
-    })
 }
 
 impl App<'_> {
@@ -145,10 +130,10 @@ impl App<'_> {
             color_space: wgpu::SurfaceColorSpace::Auto,
         };
         surface.configure(&ctx.device, &config);
-        let pipelines = Pipelines::new(&ctx, format)?;
+        let pass = MrfPass::new(&ctx, format)?;
         let model = self.model;
         let all: Vec<usize> = (0..model.subspaces.len()).collect();
-        let n = o.texture_size;
+        let n = o.tile;
         let cache = model.synthesis_cache_for(
             &all,
             &SynthesisOptions {
@@ -159,10 +144,9 @@ impl App<'_> {
             },
         )?;
         let tables = MaterialTables::new(model, &cache, None)?;
-        let bump_material = GpuMaterial::new(&ctx, &pipelines, &cache, None, &tables)?;
+        let bump_material = GpuMaterial::new(&ctx, &pass, &cache, None, &tables)?;
         let heights = model.range_heights(n, n, o.seed);
-        let displaced_material =
-            GpuMaterial::new(&ctx, &pipelines, &cache, heights.as_ref(), &tables)?;
+        let displaced_material = GpuMaterial::new(&ctx, &pass, &cache, heights.as_ref(), &tables)?;
         let mut meshes = Vec::new();
         for kind in &o.meshes {
             meshes.push((
@@ -176,7 +160,7 @@ impl App<'_> {
             surface,
             config,
             ctx,
-            pipelines,
+            pass,
             bump_material,
             displaced_material,
             meshes,
@@ -212,15 +196,15 @@ impl App<'_> {
         };
         let (material, mesh) = match self.mapping {
             Mapping::Displacement => (&v.displaced_material, &v.meshes[v.mesh].1),
-            _ => (&v.bump_material, &v.meshes[v.mesh].0),
+            Mapping::Bump | Mapping::Plain => (&v.bump_material, &v.meshes[v.mesh].0),
         };
-        material.set_frame(&v.ctx, &scene, mesh, 0);
+        material.set_frame(&v.ctx, &scene, mesh);
         let view = frame.texture.create_view(&Default::default());
         let depth_view = v.depth.create_view(&Default::default());
         let mut encoder = v.ctx.device.create_command_encoder(&Default::default());
         let mapping = self.mapping;
         encode_frame(&mut encoder, &view, &depth_view, |pass| {
-            v.pipelines.draw(pass, mapping, material, mesh)
+            v.pass.draw(pass, mapping, material, mesh)
         });
         v.ctx.queue.submit([encoder.finish()]);
         // Wait for the GPU so that the title shows the real frame time, not the submission's.
@@ -248,7 +232,7 @@ impl App<'_> {
                 let tv = t.create_view(&Default::default());
                 let mut encoder = v.ctx.device.create_command_encoder(&Default::default());
                 encode_frame(&mut encoder, &tv, &depth_view, |pass| {
-                    v.pipelines.draw(pass, mapping, material, mesh)
+                    v.pass.draw(pass, mapping, material, mesh)
                 });
                 v.ctx.queue.submit([encoder.finish()]);
                 t
@@ -432,6 +416,7 @@ pub fn run_viewer(model: &MaterialModel, options: ViewerOptions) -> Result<()> {
     if options.meshes.is_empty() {
         return Err(RenderError::parameter("--mesh", "no mesh to show"));
     }
+    check_tile(model, options.tile)?;
     let event_loop = EventLoop::new().map_err(|e| RenderError::Window(e.to_string()))?;
     event_loop.set_control_flow(ControlFlow::Wait);
     let mut app = App {

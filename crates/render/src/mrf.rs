@@ -1,0 +1,434 @@
+//! The MRF material on the GPU: synthesized subspace images in a texture array, the range map
+//! as a relief texture, the cluster of every measured (view, light) pair, and the pass that
+//! draws them with one pipeline per [`Mapping`] (`shaders/mrf.wgsl` and the mapping's file).
+
+use half::f16;
+use ndarray::{Array2, Array3};
+use wgpu::util::DeviceExt;
+
+use super::lut::{DirectionLut, MeanShading};
+use super::pipeline::{
+    COMMON_WGSL, CommonBuffers, GpuMesh, bind_group_layout, common_layout_entries, render_pipeline,
+    storage_buffer, storage_entry,
+};
+use super::scene::Scene;
+use super::{GpuContext, Mapping, RenderError, Result};
+use btfmrf::model::MaterialModel;
+use btfmrf::synthesis::SynthesisCache;
+
+const MRF_WGSL: &str = include_str!("../../../shaders/mrf.wgsl");
+
+/// The WGSL source of a mapping's pipeline: `common.wgsl`, `mrf.wgsl`, then the mapping's own
+/// file.
+pub fn shader_source(mapping: Mapping) -> String {
+    let own = match mapping {
+        Mapping::Bump => include_str!("../../../shaders/bump.wgsl"),
+        Mapping::Displacement => include_str!("../../../shaders/displacement.wgsl"),
+        Mapping::Plain => include_str!("../../../shaders/plain.wgsl"),
+    };
+    format!("{COMMON_WGSL}\n{MRF_WGSL}\n{own}")
+}
+
+/// The CPU side of a material on the GPU: what [`GpuMaterial::new`] uploads.
+#[derive(Debug, Clone)]
+pub struct MaterialTables {
+    /// Texture side on the GPU, texels: the synthesized tile ([`MaterialTables::tile`])
+    /// box-filtered down by a power of two (the screen footprint asks for no more).
+    pub size: usize,
+    /// Side of the synthesized tile, measured texels: what one texture repetition holds on
+    /// the mesh, whatever [`MaterialTables::size`] samples it at.
+    pub tile: usize,
+    /// Clusters with a texture layer, in layer order.
+    pub clusters: Vec<usize>,
+    /// Per (view * lights + light), the texture layer of its cluster or `u32::MAX`.
+    pub pair_layer: Vec<u32>,
+    /// Measured views and lights.
+    pub counts: (usize, usize),
+    /// Direction tables of the views and of the lights.
+    pub view_lut: DirectionLut,
+    /// See `view_lut`.
+    pub light_lut: DirectionLut,
+    /// Mean shading of the range map's normals (`None` without a range map).
+    pub mean_shading: Option<MeanShading>,
+    /// Per measured light, the bump strength `k` of the shading factor `1 + k (s - 1)`
+    /// ([`btfmrf::geometry::relight`]; 1 where the model stores none).
+    pub light_strength: Vec<f32>,
+}
+
+impl MaterialTables {
+    /// The tables for `model` with the clusters synthesized in `cache`; `luts` are the
+    /// model's view and light tables, when already built (else they are built here).
+    ///
+    /// # Errors
+    /// Never for a valid model (direction interpolation of finite directions).
+    pub fn new(
+        model: &MaterialModel,
+        cache: &SynthesisCache,
+        luts: Option<(DirectionLut, DirectionLut)>,
+    ) -> Result<Self> {
+        let (view_lut, light_lut) = match luts {
+            Some(l) => l,
+            None => (
+                DirectionLut::new(&model.views)?,
+                DirectionLut::new(&model.lights)?,
+            ),
+        };
+        let clusters: Vec<usize> = (0..model.subspaces.len())
+            .filter(|&k| cache.get(k).is_some())
+            .collect();
+        let mut layer_of = vec![u32::MAX; model.subspaces.len()];
+        for (layer, &k) in clusters.iter().enumerate() {
+            layer_of[k] = layer as u32;
+        }
+        let (nv, nl) = (model.views.len(), model.lights.len());
+        let pair_layer = (0..nv * nl)
+            .map(|i| layer_of[model.cluster_of(i / nl, i % nl)])
+            .collect();
+        Ok(Self {
+            size: cache.options().rows,
+            tile: cache.options().rows,
+            clusters,
+            pair_layer,
+            counts: (nv, nl),
+            view_lut,
+            light_lut,
+            mean_shading: cache.normals().map(MeanShading::new),
+            light_strength: (0..nl)
+                .map(|l| model.range_map.as_ref().map_or(1.0, |m| m.strength_of(l)) as f32)
+                .collect(),
+        })
+    }
+
+    /// The same tables with the tile sampled at `side` texels on the GPU (a power-of-two
+    /// fraction of the tile, at least 1).
+    ///
+    /// # Errors
+    /// A `side` that is not the tile divided by a power of two.
+    pub fn at_resolution(mut self, side: usize) -> Result<Self> {
+        if side == 0
+            || side > self.tile
+            || !(self.tile / side).is_power_of_two()
+            || !self.tile.is_multiple_of(side)
+        {
+            return Err(RenderError::parameter(
+                "--texture-size",
+                format!(
+                    "{side} is not the {}-texel tile divided by a power of two",
+                    self.tile
+                ),
+            ));
+        }
+        self.size = side;
+        Ok(self)
+    }
+}
+
+/// A material's textures, tables and uniforms on the GPU, bound as group 0 of [`MrfPass`].
+#[derive(Debug)]
+pub struct GpuMaterial {
+    common: CommonBuffers,
+    bind_group: wgpu::BindGroup,
+    /// Texture side on the GPU, texels.
+    pub size: usize,
+    /// Side of the synthesized tile, measured texels (the unit of the range map's heights).
+    pub tile: usize,
+    /// True when the model has a range map.
+    pub has_relief: bool,
+}
+
+/// Mip levels of a `side` x `side` texture (down to 1 x 1).
+pub fn mip_levels(side: usize) -> u32 {
+    usize::BITS - side.max(1).leading_zeros()
+}
+
+/// One layer's texels and its mip chain (2 x 2 box filter; odd sides clamp), as RGBA f16
+/// bytes, finest level first, appended to `out`; the first `skip` levels are made but not
+/// written (the texture then starts at side `side >> skip`, the same surface coarser).
+fn push_mip_chain(
+    out: &mut Vec<u8>,
+    side: usize,
+    skip: u32,
+    texel: impl Fn(usize, usize) -> [f32; 4],
+) {
+    let mut level: Vec<[f32; 4]> = (0..side * side)
+        .map(|i| texel(i / side, i % side))
+        .collect();
+    let mut n = side;
+    for l in 0..mip_levels(side) {
+        if l > 0 {
+            let m = (n / 2).max(1);
+            let at = |y: usize, x: usize| level[y.min(n - 1) * n + x.min(n - 1)];
+            let next: Vec<[f32; 4]> = (0..m * m)
+                .map(|i| {
+                    let (y, x) = (2 * (i / m), 2 * (i % m));
+                    let q = [at(y, x), at(y, x + 1), at(y + 1, x), at(y + 1, x + 1)];
+                    std::array::from_fn(|c| 0.25 * (q[0][c] + q[1][c] + q[2][c] + q[3][c]))
+                })
+                .collect();
+            level = next;
+            n = m;
+        }
+        if l < skip {
+            continue;
+        }
+        for t in &level {
+            for v in t {
+                out.extend_from_slice(&f16::from_f32(*v).to_le_bytes());
+            }
+        }
+    }
+}
+
+impl GpuMaterial {
+    /// Uploads the synthesized subspace images of `cache`, the range map (normals from the
+    /// cache, `heights` for displacement, mean-centred here) and the tables, for `pass`.
+    ///
+    /// # Errors
+    /// A texture beyond the device's limits.
+    pub fn new(
+        ctx: &GpuContext,
+        pass: &MrfPass,
+        cache: &SynthesisCache,
+        heights: Option<&Array2<f64>>,
+        tables: &MaterialTables,
+    ) -> Result<Self> {
+        let device = &ctx.device;
+        let size = tables.size;
+        let limits = device.limits();
+        if size as u32 > limits.max_texture_dimension_2d {
+            return Err(RenderError::parameter(
+                "--texture-size",
+                format!(
+                    "{size} exceeds the device's {} texels",
+                    limits.max_texture_dimension_2d
+                ),
+            ));
+        }
+        // A layer of zeros stands in when nothing was synthesized (the plain pipeline samples
+        // layer 0; the bump and displacement pipelines skip missing layers).
+        let tile = tables.tile;
+        let skip = (tile / size.max(1)).trailing_zeros();
+        let zero = Array3::<f32>::zeros((3, tile, tile));
+        let mut planes: Vec<&Array3<f32>> = tables
+            .clusters
+            .iter()
+            .filter_map(|&k| cache.get(k))
+            .collect();
+        if planes.is_empty() {
+            planes.push(&zero);
+        }
+        let extent = |layers: usize| wgpu::Extent3d {
+            width: size as u32,
+            height: size as u32,
+            depth_or_array_layers: layers as u32,
+        };
+        let texture = |label, layers: usize, data: &[u8]| {
+            device.create_texture_with_data(
+                &ctx.queue,
+                &wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: extent(layers),
+                    mip_level_count: mip_levels(size),
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::Rgba16Float,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                    view_formats: &[],
+                },
+                wgpu::util::TextureDataOrder::LayerMajor,
+                data,
+            )
+        };
+        let mut sub_data = Vec::new();
+        for p in &planes {
+            push_mip_chain(&mut sub_data, tile, skip, |y, x| {
+                [p[[0, y, x]], p[[1, y, x]], p[[2, y, x]], 1.0]
+            });
+        }
+        let subspaces = ctx.checked("subspace textures", || {
+            texture("subspaces", planes.len(), &sub_data)
+        })?;
+        let has_relief = cache.normals().is_some();
+        // Mip levels average the normals without renormalising them: far away, the shading
+        // max(0, n . l) then tends to the mean over the footprint, as it should.
+        let mut relief_data = Vec::new();
+        match cache.normals() {
+            Some(n) => {
+                let mean = heights.map_or(0.0, |h| h.mean().unwrap_or(0.0));
+                push_mip_chain(&mut relief_data, tile, skip, |y, x| {
+                    let h = heights.map_or(0.0, |h| h[[y, x]] - mean);
+                    [n[[0, y, x]], n[[1, y, x]], n[[2, y, x]], h].map(|v| v as f32)
+                });
+            }
+            None => push_mip_chain(&mut relief_data, tile, skip, |_, _| [0.0, 0.0, 1.0, 0.0]),
+        }
+        let relief = ctx.checked("relief texture", || texture("relief", 1, &relief_data))?;
+        let common = CommonBuffers::new(ctx, (&tables.view_lut, &tables.light_lut))?;
+        let pair_layer =
+            storage_buffer(ctx, "pair layers", bytemuck::cast_slice(&tables.pair_layer))?;
+        let ones = vec![1.0f32; super::lut::SHADING_GRID * super::lut::SHADING_GRID];
+        let shading = tables.mean_shading.as_ref().map_or(&ones, |m| &m.values);
+        let mean_shade = storage_buffer(ctx, "mean shading", bytemuck::cast_slice(shading))?;
+        let light_strength = storage_buffer(
+            ctx,
+            "light strengths",
+            bytemuck::cast_slice(&tables.light_strength),
+        )?;
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("repeat"),
+            address_mode_u: wgpu::AddressMode::Repeat,
+            address_mode_v: wgpu::AddressMode::Repeat,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let sub_view = subspaces.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let relief_view = relief.create_view(&wgpu::TextureViewDescriptor::default());
+        let mut entries = common.entries();
+        entries.extend([
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(&sub_view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::TextureView(&relief_view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::Sampler(&sampler),
+            },
+            wgpu::BindGroupEntry {
+                binding: 8,
+                resource: pair_layer.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 9,
+                resource: mean_shade.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 10,
+                resource: light_strength.as_entire_binding(),
+            },
+        ]);
+        let bind_group = ctx.checked("material bind group", || {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("material"),
+                layout: &pass.layout,
+                entries: &entries,
+            })
+        })?;
+        Ok(Self {
+            common,
+            bind_group,
+            size,
+            tile,
+            has_relief,
+        })
+    }
+
+    /// Writes the uniforms of one frame of `scene` on `mesh` (whose texture scale sets the
+    /// displacement's world units).
+    pub fn set_frame(&self, ctx: &GpuContext, scene: &Scene, mesh: &GpuMesh) {
+        let own = [
+            if self.has_relief { 1.0 } else { 0.0 },
+            mesh.world_per_uv / self.tile as f32,
+            0.0,
+        ];
+        self.common.write(ctx, scene, own);
+    }
+}
+
+/// The MRF material's bind group layout and one render pipeline per [`Mapping`], for one
+/// colour format.
+#[derive(Debug)]
+pub struct MrfPass {
+    layout: wgpu::BindGroupLayout,
+    pipelines: [wgpu::RenderPipeline; 3],
+}
+
+impl MrfPass {
+    /// Compiles the pipelines of every mapping for colour targets of `format`.
+    ///
+    /// # Errors
+    /// A shader or pipeline the device rejects.
+    pub fn new(ctx: &GpuContext, format: wgpu::TextureFormat) -> Result<Self> {
+        let vf = wgpu::ShaderStages::VERTEX_FRAGMENT;
+        let texture = |binding, dim| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: vf,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: dim,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let mut entries = common_layout_entries().to_vec();
+        entries.extend([
+            texture(1, wgpu::TextureViewDimension::D2Array),
+            texture(2, wgpu::TextureViewDimension::D2),
+            wgpu::BindGroupLayoutEntry {
+                binding: 3,
+                visibility: vf,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            },
+            storage_entry(8),
+            storage_entry(9),
+            storage_entry(10),
+        ]);
+        let layout = bind_group_layout(ctx, "mrf material", &entries);
+        let pipeline = |mapping: Mapping| {
+            render_pipeline(ctx, mapping.name(), &layout, shader_source(mapping), format)
+        };
+        let [a, b, c] = Mapping::ALL;
+        let pipelines = [pipeline(a)?, pipeline(b)?, pipeline(c)?];
+        Ok(Self { layout, pipelines })
+    }
+
+    /// Records one draw of `mesh` with `material` by `mapping` into `pass`.
+    pub fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        mapping: Mapping,
+        material: &GpuMaterial,
+        mesh: &GpuMesh,
+    ) {
+        mesh.draw(pass, &self.pipelines[mapping.index()], &material.bind_group);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chain(side: usize, skip: u32) -> Vec<f32> {
+        let mut bytes = Vec::new();
+        push_mip_chain(&mut bytes, side, skip, |y, x| {
+            [(y * side + x) as f32 / 64.0, y as f32, x as f32, 1.0]
+        });
+        bytes
+            .chunks_exact(2)
+            .map(|b| f16::from_le_bytes([b[0], b[1]]).to_f32())
+            .collect()
+    }
+
+    #[test]
+    fn a_coarser_texture_is_the_tail_of_the_full_mip_chain() {
+        let full = chain(8, 0);
+        // 8x8 + 4x4 + 2x2 + 1x1 texels of 4 channels.
+        assert_eq!(full.len(), 4 * (64 + 16 + 4 + 1));
+        let coarse = chain(8, 1);
+        assert_eq!(coarse.len(), 4 * (16 + 4 + 1));
+        assert_eq!(coarse[..], full[4 * 64..]);
+        // The first coarse texel is the mean of the 2x2 block at the origin.
+        assert_eq!(coarse[1], 0.5);
+        assert_eq!(coarse[2], 0.5);
+        assert_eq!(coarse[0], (0.0 + 1.0 + 8.0 + 9.0) / 4.0 / 64.0);
+    }
+}

@@ -1,0 +1,86 @@
+// The MRF material's bindings and shading, shared by its pipelines (bump, displacement,
+// plain), after common.wgsl. The CPU reference is src/synthesis.rs (image_from_cache,
+// bump_relight); the buffers are built in crates/render/src/mrf.rs.
+//
+// Globals.params here: y = 1 when the model has a range map, z = displacement scale (world
+// units per height texel), w = unused. Lights at or beyond the set's lowest light
+// (globals.limits.z) leave a fragment black.
+
+const SHADING_GRID: u32 = 64u;
+const NO_LAYER: u32 = 0xffffffffu;
+
+// The synthesized subspace images (tileable), one layer per synthesized cluster.
+@group(0) @binding(1) var subspaces: texture_2d_array<f32>;
+// Range map: xyz = unit normal in the tangent frame, w = height in texels (mean 0).
+@group(0) @binding(2) var relief: texture_2d<f32>;
+@group(0) @binding(3) var tex_sampler: sampler;
+// (view * lights + light) -> texture layer of its cluster, NO_LAYER when not synthesized.
+@group(0) @binding(8) var<storage, read> pair_layer: array<u32>;
+// Mean of max(0, n . l) over the texture, on a SHADING_GRID^2 node grid of light directions.
+@group(0) @binding(9) var<storage, read> mean_shade: array<f32>;
+// Per measured light, the bump strength k of the shading factor 1 + k (s - 1).
+@group(0) @binding(10) var<storage, read> light_strength: array<f32>;
+
+// Mean of max(0, n . l) over the texture for the projected tangent-frame light direction q
+// (bilinear in the table).
+fn mean_shading(q: vec2<f32>) -> f32 {
+    let last = f32(SHADING_GRID - 1u);
+    let f = clamp((q + vec2<f32>(HALF_PI)) / PI * last, vec2<f32>(0.0), vec2<f32>(last));
+    let x0 = min(u32(floor(f.x)), SHADING_GRID - 2u);
+    let y0 = min(u32(floor(f.y)), SHADING_GRID - 2u);
+    let t = f - vec2<f32>(f32(x0), f32(y0));
+    let i = y0 * SHADING_GRID + x0;
+    let top = mix(mean_shade[i], mean_shade[i + 1u], t.x);
+    let bottom = mix(mean_shade[i + SHADING_GRID], mean_shade[i + SHADING_GRID + 1u], t.x);
+    return mix(top, bottom, t.y);
+}
+
+// The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
+// light) pairs blend their clusters' subspace images, then the range map's normal relights
+// the blend for the light by the factor 1 + k (s - 1), s = max(0, n . l) / mean shading, so
+// that the subspace images' own average shading is not applied twice, k the measured
+// strength (bump_relight, bump_strength). Clusters that were not synthesized
+// (outside the planned set) are skipped and the weights renormalised.
+fn shade_mrf(in: VertexOutput) -> vec4<f32> {
+    let dirs = tangent_directions(in);
+    let v = dirs.v;
+    let l = dirs.l;
+    let falloff = dirs.falloff;
+    let ddx = dpdx(in.uv);
+    let ddy = dpdy(in.uv);
+    let relief_here = textureSampleGrad(relief, tex_sampler, in.uv, ddx, ddy);
+    if (l.z <= globals.limits.z) {
+        return vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    }
+    let ql = project_dir(l, globals.limits.y);
+    let iv = interpolate_dir(project_dir(v, globals.limits.x), true);
+    let il = interpolate_dir(ql, false);
+    var sum = vec3<f32>(0.0);
+    var total = 0.0;
+    for (var a = 0; a < 3; a++) {
+        for (var b = 0; b < 3; b++) {
+            let w = iv.weight[a] * il.weight[b];
+            if (w > 0.0) {
+                let layer = pair_layer[iv.index[a] * globals.counts.y + il.index[b]];
+                if (layer != NO_LAYER) {
+                    sum += w * textureSampleGrad(subspaces, tex_sampler, in.uv, layer, ddx, ddy).rgb;
+                    total += w;
+                }
+            }
+        }
+    }
+    var colour = sum / max(total, 1e-12);
+    if (globals.params.y > 0.5) {
+        let mean = mean_shading(ql);
+        if (mean >= 1e-3) {
+            // The measured lights' strengths, blended like the images (bump_strength).
+            var k = 0.0;
+            for (var b = 0; b < 3; b++) {
+                k += il.weight[b] * light_strength[il.index[b]];
+            }
+            let s = max(dot(relief_here.xyz, l), 0.0) / mean;
+            colour *= 1.0 + k * (s - 1.0);
+        }
+    }
+    return vec4<f32>(colour * falloff, 1.0);
+}
