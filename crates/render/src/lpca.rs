@@ -62,8 +62,8 @@ impl LpcaTables {
         let mut eigen = Vec::new();
         let mut texel_weights = Vec::new();
         for f in model.parts() {
-            let d = f.dim;
-            if d != pairs * 3 || f.components != c || f.items() != n {
+            let d = f.dim();
+            if d != pairs * 3 || f.components() != c || f.items() != n {
                 return Err(RenderError::Unsupported(format!(
                     "inconsistent {} model: vectors of {d} values for {pairs} pairs",
                     model.method().name()
@@ -71,23 +71,16 @@ impl LpcaTables {
             }
             for k in 0..f.clusters() {
                 for p in 0..pairs {
-                    let at = |v: &[f32], row: usize| {
-                        let o = row * d + 3 * p;
-                        [v[o], v[o + 1], v[o + 2], 0.0]
-                    };
-                    eigen.push(at(&f.means, k));
-                    for t in 0..c {
-                        eigen.push(at(&f.bases, k * c + t));
-                    }
+                    eigen.extend(f.rgb_terms(k, 3 * p).map(|[r, g, b]| [r, g, b, 0.0]));
                 }
             }
-            texel_weights.extend_from_slice(&f.weights);
+            texel_weights.extend_from_slice(f.weights());
         }
         let texel_cluster = if per_view {
             vec![0; n]
         } else {
             model.parts()[0]
-                .assignment
+                .assignment()
                 .iter()
                 .map(|&k| u32::from(k))
                 .collect()
