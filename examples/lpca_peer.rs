@@ -15,7 +15,7 @@ use std::time::Instant;
 
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, BtfError, DirectionSet, ImageSource};
-use btfmrf::lpca::{ClusterOptions, data, fit_rows};
+use btfmrf::lpca::{FactorizationOptions, data, fit_rows};
 use btfmrf::progress::NoProgress;
 use ndarray::Array3;
 
@@ -80,7 +80,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (n, d) = (64 * 64, nv * nl * 3);
     write_npy(&dir.join("data.npy"), n, d, &x)?;
 
-    let options = ClusterOptions {
+    let options = FactorizationOptions {
         clusters: 32,
         components: 8,
         max_iterations: 10,
@@ -99,7 +99,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (f, stats) = result.expect("one run");
     let sizes = {
         let mut s = vec![0usize; f.clusters()];
-        f.assignment.iter().for_each(|&k| s[usize::from(k)] += 1);
+        f.assignment().iter().for_each(|&k| s[usize::from(k)] += 1);
         s
     };
     println!(

@@ -40,6 +40,7 @@ pub mod eval;
 pub mod features;
 mod fft;
 pub mod geometry;
+pub mod io;
 pub mod lpca;
 pub mod memory;
 pub mod model;

@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use crate::btf::{Direction, Weighted};
 use crate::decompose::marginals::{self, MarginalMap};
 use crate::decompose::{Border, Pyramid};
-use crate::geometry::integrate::{Border as NormalBorder, normals_of_periodic};
+use crate::geometry::integrate::{Edges, normals_of_periodic};
 use crate::geometry::relight::shading_factor;
 use crate::geometry::{quilt, resample_periodic};
 use crate::model::{BandModel, LevelModel, MaterialModel, ModelError, Result};
@@ -391,7 +391,7 @@ impl MaterialModel {
         let mut out = out.unwrap_or_else(|| Array3::zeros((3, o.rows, o.cols)));
         if let Some(heights) = &cache.heights {
             let strength = self.bump_strength(light)?;
-            bump_relight(&mut out, heights, NormalBorder::Wrap, light, strength);
+            bump_relight(&mut out, heights, Edges::Wrap, light, strength);
         }
         Ok(out)
     }
@@ -503,7 +503,7 @@ const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
 pub fn bump_relight(
     image: &mut Array3<f32>,
     heights: &Array2<f64>,
-    border: NormalBorder,
+    border: Edges,
     light: &Direction,
     strength: f64,
 ) {

@@ -263,7 +263,7 @@ fn every_rti_set_relights_like_its_photographs() {
 #[test]
 fn the_enlarged_range_map_is_not_a_grid_of_copies() {
     use btfmrf::analysis::{AnalysisOptions, analyze};
-    use btfmrf::geometry::integrate::{Border, shading};
+    use btfmrf::geometry::integrate::{Edges, shading};
     let btf = Btf::open("../shared/data/rti/clay-leaf").unwrap();
     let options = AnalysisOptions {
         clusters: 4,
@@ -286,7 +286,7 @@ fn the_enlarged_range_map_is_not_a_grid_of_copies() {
             worst = (c, shift);
         }
     }
-    let shade = shading(&h, Border::Wrap, Direction::new(60.0, 30.0).vector());
+    let shade = shading(&h, Edges::Wrap, Direction::new(60.0, 30.0).vector());
     let steps: Vec<f64> = (0..n)
         .map(|x| {
             (0..n)

@@ -19,7 +19,7 @@ fn set() -> &'static PathBuf {
         std::fs::create_dir(&set).expect("made");
         let png = |w, h| {
             let img = ndarray::Array3::from_elem((3, h, w), 0.3f32);
-            btfmrf::btf::io::image::encode(&img, btfmrf::btf::ImageFormat::Png, "x").unwrap()
+            btfmrf::btf::io::picture::encode(&img, btfmrf::btf::ImageFormat::Png, "x").unwrap()
         };
         std::fs::write(set.join("a.png"), png(4, 4)).unwrap();
         std::fs::write(set.join("b.png"), png(4, 4)).unwrap();

@@ -5,6 +5,6 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = btfmrf::btf::io::image::probe_size(data, "fuzz");
-    let _ = btfmrf::btf::io::image::decode(data, "fuzz");
+    let _ = btfmrf::btf::io::picture::probe_size(data, "fuzz");
+    let _ = btfmrf::btf::io::picture::decode(data, "fuzz");
 });

@@ -1,14 +1,10 @@
 //! The [`Btf`] type: view and light direction sets, a spatial size, and images handed out
 //! lazily by (view, light) index from some [`ImageSource`].
 
-use std::path::Path;
-
 use ndarray::Array3;
 
 use super::directions::DirectionSet;
 use super::error::{BtfError, Result};
-use super::io;
-use super::synthetic::{SyntheticBtf, SyntheticMaterial};
 
 /// Where a BTF's images come from: an archive, a folder, a procedural renderer, memory.
 ///
@@ -48,31 +44,6 @@ impl std::fmt::Debug for Btf {
 }
 
 impl Btf {
-    /// Opens a BTF from disk, recognising the layout:
-    /// - a `.zip` archive or a folder of UBO2003-named images (`... tl015 pl060 tv000 pv000.jpg`,
-    ///   JPEG, PNG or EXR);
-    /// - an RTI folder holding a `.lp` light-position file (one view, N lights), or the `.lp`
-    ///   file itself.
-    ///
-    /// The layout is validated completely (names, directions, image sizes) before this returns;
-    /// pixel data is decoded only when [`Btf::image`] asks for it.
-    ///
-    /// # Errors
-    /// Unreadable paths, corrupt archives, bad names, missing or duplicate directions,
-    /// mixed or oversized images; each error names the file at fault.
-    pub fn open(path: impl AsRef<Path>) -> Result<Self> {
-        io::open(path.as_ref())
-    }
-
-    /// A procedural material rendered lazily in the Bonn sampling (81 x 81), `size` x `size`
-    /// texels, deterministic in `seed`. See [`super::synthetic`].
-    ///
-    /// # Errors
-    /// `size` outside the accepted range.
-    pub fn synthetic(material: SyntheticMaterial, size: u32, seed: u64) -> Result<Self> {
-        Ok(SyntheticBtf::new(material, size, seed)?.into_btf())
-    }
-
     /// A BTF over any image source.
     ///
     /// # Errors
@@ -133,7 +104,7 @@ impl Btf {
                     format!("{name} has shape {d:?}, expected (3, {h}, {w})"),
                 ));
             }
-            io::image::check_finite(im, &name)?;
+            check_finite(im, &name)?;
         }
         let (w32, h32) = (to_u32(w, "width")?, to_u32(h, "height")?);
         let source = MemorySource {
@@ -243,5 +214,31 @@ impl ImageSource for MemorySource {
 
     fn describe(&self, view: usize, light: usize) -> String {
         format!("in-memory image (view {view}, light {light})")
+    }
+}
+
+/// Fails with [`BtfError::NonFinite`] if any sample of a `(c, h, w)` image is NaN or infinite.
+pub fn check_finite(image: &Array3<f32>, file: &str) -> Result<()> {
+    let (channels, h, w) = image.dim();
+    let mut count = 0usize;
+    let mut first = None;
+    for y in 0..h {
+        for x in 0..w {
+            for c in 0..channels {
+                if !image[[c, y, x]].is_finite() {
+                    count += 1;
+                    first.get_or_insert((x, y));
+                }
+            }
+        }
+    }
+    match first {
+        None => Ok(()),
+        Some((x, y)) => Err(BtfError::NonFinite {
+            file: file.to_string(),
+            count,
+            x,
+            y,
+        }),
     }
 }

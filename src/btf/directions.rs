@@ -8,6 +8,7 @@
 use std::sync::OnceLock;
 
 use super::error::{BtfError, Result};
+use crate::io::bytes::{Parse, Reader};
 
 /// Elevations of the Bonn sampling, in degrees.
 pub const BONN_THETAS_DEG: [f64; 6] = [0.0, 15.0, 30.0, 45.0, 60.0, 75.0];
@@ -98,6 +99,18 @@ impl PartialEq for DirectionSet {
 }
 
 impl DirectionSet {
+    /// Reads a set as the model files store it (`.btfm`, `.lpca`; docs/FORMAT.md): a `u16`
+    /// count, then `theta` and `phi` per direction as finite `f32` degrees. `what` names the
+    /// set in errors.
+    pub(crate) fn read_le(r: &mut Reader, what: &str) -> Parse<Self> {
+        let count = usize::from(r.u16()?);
+        r.ensure(count, 8, what)?;
+        let dirs = (0..count)
+            .map(|_| Ok(Direction::new(r.f32()?, r.f32()?)))
+            .collect::<Parse<Vec<_>>>()?;
+        DirectionSet::new(dirs).map_err(|e| format!("{what}: {e}"))
+    }
+
     /// A set of directions in the given order.
     ///
     /// # Errors

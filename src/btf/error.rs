@@ -103,6 +103,15 @@ pub enum BtfError {
     },
 }
 
+impl From<crate::io::IoError> for BtfError {
+    fn from(e: crate::io::IoError) -> Self {
+        Self::Io {
+            path: e.path,
+            source: e.source,
+        }
+    }
+}
+
 impl BtfError {
     /// An I/O error on `path`.
     pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {

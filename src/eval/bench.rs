@@ -16,11 +16,12 @@ use std::time::Instant;
 use ndarray::{Array3, s};
 
 use crate::analysis::{AnalysisOptions, analyze};
-use crate::btf::io::{publish_dir, temp_dir_beside, write_file_atomic, write_image};
+use crate::btf::io::write_image;
 use crate::btf::{Btf, Direction};
 use crate::eval::judge::{Verdict, Yardstick};
 use crate::eval::montage::montage;
 use crate::eval::plot::benchmark_plots;
+use crate::io::{publish_dir, temp_dir_beside, write_file_atomic};
 use crate::lpca::{LpcaModel, LpcaOptions, Method};
 use crate::model::{MaterialModel, ModelKind, format};
 use crate::progress::Progress;

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use crate::btf::BtfError;
+use crate::io::IoError;
 use crate::lpca::LpcaError;
 use crate::model::ModelError;
 
@@ -16,6 +17,9 @@ pub enum EvalError {
     /// Reading the BTF or writing an image failed.
     #[error(transparent)]
     Btf(#[from] BtfError),
+    /// Writing a report file failed.
+    #[error(transparent)]
+    Io(#[from] IoError),
     /// Analysing or synthesizing a model failed.
     #[error(transparent)]
     Model(#[from] ModelError),

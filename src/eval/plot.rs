@@ -9,7 +9,8 @@ use plotters::prelude::*;
 use super::bench::{BenchReport, MethodResult};
 use super::{EvalError, Result};
 use crate::btf::ImageFormat;
-use crate::btf::io::{image::encode_rgb8, write_file_atomic};
+use crate::btf::io::picture::encode_rgb8;
+use crate::io::write_file_atomic;
 
 /// The embedded font (DejaVu Sans, see assets/fonts/DejaVuSans.LICENSE), so plots have text
 /// without system font libraries.

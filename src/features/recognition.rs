@@ -31,7 +31,7 @@ use crate::color::{Srgb8Encoder, linear_to_xyz, srgb8_to_linear_table, xyz_to_li
 
 /// A descriptor and its distance.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Method {
+pub enum Descriptor {
     /// All invariant MRF features, std-normalised L1.
     Mrf,
     /// Only the MRF features invariant to any 3x3 colour transform, std-normalised L1.
@@ -42,22 +42,22 @@ pub enum Method {
     Lbp,
 }
 
-impl Method {
+impl Descriptor {
     /// Every method, in report order.
-    pub const ALL: [Method; 4] = [
-        Method::Mrf,
-        Method::MrfColourTransform,
-        Method::ColourHistogram,
-        Method::Lbp,
+    pub const ALL: [Descriptor; 4] = [
+        Descriptor::Mrf,
+        Descriptor::MrfColourTransform,
+        Descriptor::ColourHistogram,
+        Descriptor::Lbp,
     ];
 
     /// Short name for tables.
     pub fn name(self) -> &'static str {
         match self {
-            Method::Mrf => "MRF (all)",
-            Method::MrfColourTransform => "MRF (3x3-invariant)",
-            Method::ColourHistogram => "colour histogram",
-            Method::Lbp => "LBP",
+            Descriptor::Mrf => "MRF (all)",
+            Descriptor::MrfColourTransform => "MRF (3x3-invariant)",
+            Descriptor::ColourHistogram => "colour histogram",
+            Descriptor::Lbp => "LBP",
         }
     }
 }
@@ -384,13 +384,13 @@ pub fn relight(image: &Array3<f32>, b: &Matrix3<f64>, quantise: bool) -> Array3<
 /// # Errors
 /// See [`extract`].
 pub fn descriptor(
-    method: Method,
+    method: Descriptor,
     image: &Array3<f32>,
     options: &FeatureOptions,
 ) -> Result<Vec<f64>, FeatureError> {
     Ok(match method {
-        Method::Mrf => extract(image, options)?.values,
-        Method::MrfColourTransform => {
+        Descriptor::Mrf => extract(image, options)?.values,
+        Descriptor::MrfColourTransform => {
             let all = extract(image, options)?.values;
             all.into_iter()
                 .zip(options.invariances())
@@ -398,8 +398,8 @@ pub fn descriptor(
                 .map(|(v, _)| v)
                 .collect()
         }
-        Method::ColourHistogram => colour_histogram(image),
-        Method::Lbp => lbp_histogram(image),
+        Descriptor::ColourHistogram => colour_histogram(image),
+        Descriptor::Lbp => lbp_histogram(image),
     })
 }
 
@@ -451,7 +451,7 @@ pub fn nearest(
 /// An image the features refuse (see [`extract`]).
 pub fn evaluate(
     dataset: &Dataset,
-    methods: &[Method],
+    methods: &[Descriptor],
     options: &FeatureOptions,
 ) -> Result<Vec<Outcome>, FeatureError> {
     methods
@@ -466,9 +466,9 @@ pub fn evaluate(
             let test = describe(&dataset.test)?;
             let weights = std_weights(&train.iter().map(|t| t.1.clone()).collect::<Vec<_>>());
             let distance = |a: &[f64], b: &[f64]| match method {
-                Method::Mrf | Method::MrfColourTransform => weighted_l1(&weights, a, b),
-                Method::ColourHistogram => intersection_distance(a, b),
-                Method::Lbp => l1_distance(a, b),
+                Descriptor::Mrf | Descriptor::MrfColourTransform => weighted_l1(&weights, a, b),
+                Descriptor::ColourHistogram => intersection_distance(a, b),
+                Descriptor::Lbp => l1_distance(a, b),
             };
             let correct = test
                 .iter()

@@ -74,33 +74,33 @@ pub fn frankot_chellappa(normals: &Array3<f64>) -> Array2<f64> {
 /// Unit normals of a height field by central differences (x right, y up; edge samples repeated
 /// at the borders), shape (3, rows, cols).
 pub fn normals_of(heights: &Array2<f64>) -> Array3<f64> {
-    normals(heights, Border::Clamp)
+    normals(heights, Edges::Clamp)
 }
 
 /// Unit normals of a periodic height field (differences wrap around the borders).
 pub fn normals_of_periodic(heights: &Array2<f64>) -> Array3<f64> {
-    normals(heights, Border::Wrap)
+    normals(heights, Edges::Wrap)
 }
 
 /// How differences treat the borders of a height field.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Border {
+pub enum Edges {
     /// Edge samples repeated ([`normals_of`]).
     Clamp,
     /// The field wraps around ([`normals_of_periodic`]).
     Wrap,
 }
 
-impl Border {
+impl Edges {
     fn index(self, i: isize, n: usize) -> usize {
         match self {
-            Border::Clamp => i.clamp(0, n as isize - 1) as usize,
-            Border::Wrap => i.rem_euclid(n as isize) as usize,
+            Edges::Clamp => i.clamp(0, n as isize - 1) as usize,
+            Edges::Wrap => i.rem_euclid(n as isize) as usize,
         }
     }
 }
 
-fn normals(heights: &Array2<f64>, border: Border) -> Array3<f64> {
+fn normals(heights: &Array2<f64>, border: Edges) -> Array3<f64> {
     let (h, w) = heights.dim();
     let interleaved = map_normals(heights, border, |n| n);
     Array3::from_shape_vec((h, w, 3), interleaved.concat())
@@ -113,7 +113,7 @@ fn normals(heights: &Array2<f64>, border: Border) -> Array3<f64> {
 /// `max(0, n . l)` for the unit normals `n` of a height field (as [`normals_of`] or
 /// [`normals_of_periodic`] make them) and the unit light vector `l`, without storing the
 /// normals; shape (rows, cols).
-pub fn shading(heights: &Array2<f64>, border: Border, l: [f64; 3]) -> Array2<f64> {
+pub fn shading(heights: &Array2<f64>, border: Edges, l: [f64; 3]) -> Array2<f64> {
     let values = map_normals(heights, border, |n| {
         (n[0] * l[0] + n[1] * l[1] + n[2] * l[2]).max(0.0)
     });
@@ -123,7 +123,7 @@ pub fn shading(heights: &Array2<f64>, border: Border, l: [f64; 3]) -> Array2<f64
 /// `f` of the unit normal at every sample, in raster order, rows in parallel.
 fn map_normals<T: Send + Copy + Default>(
     heights: &Array2<f64>,
-    border: Border,
+    border: Edges,
     f: impl Fn([f64; 3]) -> T + Sync,
 ) -> Vec<T> {
     let (h, w) = heights.dim();

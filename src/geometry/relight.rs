@@ -9,7 +9,7 @@
 
 use ndarray::{Array2, Array3, Axis};
 
-use super::integrate::{Border, shading};
+use super::integrate::{Edges, shading};
 
 /// The smallest shading factor divided out of a photograph (deeper shadow is left as it is,
 /// not amplified into noise).
@@ -24,7 +24,7 @@ pub const MAX_STRENGTH: f64 = 1.0;
 /// light leaves (almost) nothing lit. Shape of `heights`; mean 1.
 pub fn shading_factor(
     heights: &Array2<f64>,
-    border: Border,
+    border: Edges,
     l: [f64; 3],
     strength: f64,
 ) -> Option<Array2<f64>> {
@@ -42,7 +42,7 @@ pub fn shading_factor(
 /// least-squares slope of the photograph's relative deviation on the ratio's. 0 where the
 /// light leaves the relief unlit or the relief does not vary under it.
 pub fn fit_strength(luminance: &Array2<f64>, heights: &Array2<f64>, l: [f64; 3]) -> f64 {
-    let Some(s) = shading_factor(heights, Border::Clamp, l, 1.0) else {
+    let Some(s) = shading_factor(heights, Edges::Clamp, l, 1.0) else {
         return 0.0;
     };
     let mean = luminance.mean().unwrap_or(0.0);
@@ -72,7 +72,7 @@ pub fn luminance(image: &Array3<f32>) -> Array2<f64> {
 /// is later applied to, so the measured relief shading is not applied twice. An unlit light
 /// leaves the image as it is.
 pub fn remove_shading(image: &mut Array3<f32>, heights: &Array2<f64>, l: [f64; 3], strength: f64) {
-    let Some(factor) = shading_factor(heights, Border::Clamp, l, strength) else {
+    let Some(factor) = shading_factor(heights, Edges::Clamp, l, strength) else {
         return;
     };
     for mut channel in image.axis_iter_mut(Axis(0)) {
@@ -100,9 +100,9 @@ mod tests {
     fn factor_has_mean_one_and_interpolates_the_strength() {
         let h = relief();
         let l = light(60.0, 30.0);
-        let full = shading_factor(&h, Border::Clamp, l, 1.0).unwrap();
-        let none = shading_factor(&h, Border::Clamp, l, 0.0).unwrap();
-        let half = shading_factor(&h, Border::Clamp, l, 0.5).unwrap();
+        let full = shading_factor(&h, Edges::Clamp, l, 1.0).unwrap();
+        let none = shading_factor(&h, Edges::Clamp, l, 0.0).unwrap();
+        let half = shading_factor(&h, Edges::Clamp, l, 0.5).unwrap();
         assert!((full.mean().unwrap() - 1.0).abs() < 1e-12);
         assert!(none.iter().all(|&v| (v - 1.0).abs() < 1e-12));
         for ((f, h), n) in full.iter().zip(&half).zip(&none) {
@@ -110,14 +110,14 @@ mod tests {
         }
         // A light below the horizon of a flat map lights nothing.
         let flat = Array2::zeros((8, 8));
-        assert!(shading_factor(&flat, Border::Clamp, light(95.0, 0.0), 1.0).is_none());
+        assert!(shading_factor(&flat, Edges::Clamp, light(95.0, 0.0), 1.0).is_none());
     }
 
     #[test]
     fn removing_the_shading_undoes_it() {
         let h = relief();
         let l = light(50.0, 200.0);
-        let f = shading_factor(&h, Border::Clamp, l, 0.7).unwrap();
+        let f = shading_factor(&h, Edges::Clamp, l, 0.7).unwrap();
         assert!(f.iter().all(|&v| v > FLOOR));
         let albedo = Array3::from_shape_fn((3, 40, 50), |(c, y, x)| {
             0.2 + 0.1 * c as f32 + 0.01 * ((x + y) % 5) as f32
@@ -149,13 +149,13 @@ mod tests {
             0.4 + 0.05 * (((y * 7 + x * 13) % 11) as f64 / 11.0 - 0.5)
         });
         for k in [0.0, 0.35, 0.8] {
-            let f = shading_factor(&h, Border::Clamp, l, k).unwrap();
+            let f = shading_factor(&h, Edges::Clamp, l, k).unwrap();
             let photo = &albedo * &f;
             let fit = fit_strength(&photo, &h, l);
             assert!((fit - k).abs() < 0.05, "{k}: fitted {fit}");
         }
         // Out of range is clamped; unlit gives 0.
-        let f = shading_factor(&h, Border::Clamp, l, 1.0).unwrap();
+        let f = shading_factor(&h, Edges::Clamp, l, 1.0).unwrap();
         let steep = f.mapv(|v| 1.0 + 2.0 * (v - 1.0));
         assert_eq!(fit_strength(&steep, &h, l), MAX_STRENGTH);
         let flat = Array2::zeros((8, 8));

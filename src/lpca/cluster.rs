@@ -31,24 +31,81 @@ use crate::progress::Progress;
 
 /// `K` clusters of row vectors of length `dim`, each a mean plus `C` orthonormal directions,
 /// and every row's cluster and weights: row `i` is approximated by
-/// `mean[k] + Σ_j weights[i][j] basis[k][j]` with `k = assignment[i]`.
+/// `mean(k) + Σ_t weights_of(i)[t] component(k, t)` with `k = cluster_of(i)`.
+///
+/// Stored flat (means `K x d`, bases `K x C x d`, weights `n x C`, row-major) and read through
+/// the accessors below, which hold the index arithmetic in one place.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Factorization {
-    /// Vector length `d`.
-    pub dim: usize,
-    /// Components per cluster `C`.
-    pub components: usize,
-    /// `K x d`, row-major.
-    pub means: Vec<f32>,
-    /// `K x C x d`, row-major (cluster, component, value).
-    pub bases: Vec<f32>,
-    /// The cluster of every row (`n`).
-    pub assignment: Vec<u16>,
-    /// `n x C`, row-major.
-    pub weights: Vec<f32>,
+    dim: usize,
+    components: usize,
+    means: Vec<f32>,
+    bases: Vec<f32>,
+    assignment: Vec<u16>,
+    weights: Vec<f32>,
 }
 
 impl Factorization {
+    /// A factorization from its arrays (`K x d` means, `K x C x d` bases, `n` cluster indices,
+    /// `n x C` weights, all row-major), checking that they fit together.
+    ///
+    /// # Errors
+    /// A size of zero, `C` above `d`, array lengths that disagree, more clusters than rows or
+    /// than 65535, or a cluster index out of range; the reason is returned.
+    pub fn new(
+        dim: usize,
+        components: usize,
+        means: Vec<f32>,
+        bases: Vec<f32>,
+        assignment: Vec<u16>,
+        weights: Vec<f32>,
+    ) -> Result<Self, String> {
+        let (d, c, n) = (dim, components, assignment.len());
+        if d == 0 || c == 0 || c > d {
+            return Err(format!("{c} components for vectors of {d} values"));
+        }
+        let k = means.len() / d;
+        if k == 0 || !means.len().is_multiple_of(d) {
+            return Err(format!("{} mean values for vectors of {d}", means.len()));
+        }
+        if k > usize::from(u16::MAX) || k > n {
+            return Err(format!("{k} clusters for {n} vectors"));
+        }
+        if bases.len() != k * c * d {
+            return Err(format!(
+                "{} basis values for {k} clusters of {c} components of {d}",
+                bases.len()
+            ));
+        }
+        if weights.len() != n * c {
+            return Err(format!(
+                "{} weights for {n} vectors of {c} components",
+                weights.len()
+            ));
+        }
+        if let Some(bad) = assignment.iter().find(|&&j| usize::from(j) >= k) {
+            return Err(format!("cluster index {bad} of {k} clusters"));
+        }
+        Ok(Self {
+            dim,
+            components,
+            means,
+            bases,
+            assignment,
+            weights,
+        })
+    }
+
+    /// Vector length `d`.
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// Components per cluster `C`.
+    pub fn components(&self) -> usize {
+        self.components
+    }
+
     /// Number of clusters `K`.
     pub fn clusters(&self) -> usize {
         self.means.len() / self.dim.max(1)
@@ -59,25 +116,55 @@ impl Factorization {
         self.assignment.len()
     }
 
-    /// The reconstruction of value `j` of row `i`.
-    pub fn value(&self, i: usize, j: usize) -> f32 {
-        let (d, c) = (self.dim, self.components);
-        let k = usize::from(self.assignment[i]);
-        let mut v = self.means[k * d + j];
-        for (t, &w) in self.weights[i * c..(i + 1) * c].iter().enumerate() {
-            v += w * self.bases[(k * c + t) * d + j];
-        }
-        v
+    /// The mean of cluster `k` (`d` values).
+    pub fn mean(&self, k: usize) -> &[f32] {
+        &self.means[k * self.dim..(k + 1) * self.dim]
+    }
+
+    /// Principal direction `t` of cluster `k` (`d` values).
+    pub fn component(&self, k: usize, t: usize) -> &[f32] {
+        let at = (k * self.components + t) * self.dim;
+        &self.bases[at..at + self.dim]
+    }
+
+    /// The cluster of row `i`.
+    pub fn cluster_of(&self, i: usize) -> usize {
+        usize::from(self.assignment[i])
+    }
+
+    /// The `C` weights of row `i`.
+    pub fn weights_of(&self, i: usize) -> &[f32] {
+        &self.weights[i * self.components..(i + 1) * self.components]
+    }
+
+    /// The cluster of every row (`n`), for upload or storage.
+    pub fn assignment(&self) -> &[u16] {
+        &self.assignment
+    }
+
+    /// The weights of every row, `n x C` row-major, for upload or storage.
+    pub fn weights(&self) -> &[f32] {
+        &self.weights
+    }
+
+    /// The `C + 1` terms of cluster `k` at values `col..col + 3` (one RGB triple of a
+    /// BRDF-wise or reflectance-field vector): the mean first, then each component. A row's
+    /// triple is `terms[0] + Σ_t weights_of(i)[t] terms[1 + t]`; this is the decoding table of
+    /// [`super::LpcaModel::reconstruct`] and of the GPU renderer.
+    pub fn rgb_terms(&self, k: usize, col: usize) -> impl Iterator<Item = [f32; 3]> + '_ {
+        std::iter::once(self.mean(k))
+            .chain((0..self.components).map(move |t| self.component(k, t)))
+            .map(move |v| [v[col], v[col + 1], v[col + 2]])
     }
 
     /// The whole reconstruction of row `i`.
     pub fn row(&self, i: usize) -> Vec<f32> {
-        let (d, c) = (self.dim, self.components);
-        let k = usize::from(self.assignment[i]);
-        let mut v = self.means[k * d..(k + 1) * d].to_vec();
-        for (t, &w) in self.weights[i * c..(i + 1) * c].iter().enumerate() {
-            let e = &self.bases[(k * c + t) * d..(k * c + t + 1) * d];
-            v.iter_mut().zip(e).for_each(|(x, &b)| *x += w * b);
+        let k = self.cluster_of(i);
+        let mut v = self.mean(k).to_vec();
+        for (t, &w) in self.weights_of(i).iter().enumerate() {
+            v.iter_mut()
+                .zip(self.component(k, t))
+                .for_each(|(x, &b)| *x += w * b);
         }
         v
     }
@@ -97,7 +184,7 @@ impl Factorization {
 
 /// Parameters of [`fit_rows`].
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ClusterOptions {
+pub struct FactorizationOptions {
     /// Clusters `K` (1 = plain PCA).
     pub clusters: usize,
     /// Principal components per cluster `C`.
@@ -140,7 +227,7 @@ pub fn fit_rows(
     data: &[f32],
     n: usize,
     d: usize,
-    options: &ClusterOptions,
+    options: &FactorizationOptions,
     progress: &dyn Progress,
 ) -> Result<(Factorization, FitStats)> {
     let (k, c) = (options.clusters, options.components);
@@ -188,7 +275,12 @@ pub fn fit_rows(
                 .zip(&global)
                 .for_each(|((o, &x), &g)| *o = x - g);
         });
-    let (mut f, stats) = iterate(&centred, n, d, options, progress)?;
+    let x = Matrix {
+        values: &centred,
+        rows: n,
+        dim: d,
+    };
+    let (mut f, stats) = iterate(x, options, progress)?;
     drop(centred);
     for mean in f.means.chunks_exact_mut(d) {
         mean.iter_mut().zip(&global).for_each(|(m, &g)| *m += g);
@@ -196,28 +288,87 @@ pub fn fit_rows(
     Ok((f, stats))
 }
 
+/// A data matrix: `rows` vectors of `dim` values, row-major.
+#[derive(Clone, Copy)]
+struct Matrix<'a> {
+    values: &'a [f32],
+    rows: usize,
+    dim: usize,
+}
+
+impl Matrix<'_> {
+    fn row(&self, i: usize) -> &[f32] {
+        &self.values[i * self.dim..(i + 1) * self.dim]
+    }
+
+    /// The mean of the listed rows, accumulated in f64.
+    fn mean_of(&self, rows: &[usize]) -> Vec<f32> {
+        let mut acc = vec![0.0f64; self.dim];
+        for &i in rows {
+            acc.iter_mut()
+                .zip(self.row(i))
+                .for_each(|(a, &v)| *a += f64::from(v));
+        }
+        let count = rows.len().max(1) as f64;
+        acc.iter().map(|a| (a / count) as f32).collect()
+    }
+}
+
+/// The clusters being iterated: `K` means (`K x d`) and bases (`K x C x d`), row-major.
+struct Clusters {
+    count: usize,
+    components: usize,
+    dim: usize,
+    means: Vec<f32>,
+    bases: Vec<f32>,
+}
+
+impl Clusters {
+    fn mean(&self, j: usize) -> &[f32] {
+        &self.means[j * self.dim..(j + 1) * self.dim]
+    }
+
+    /// The `C x d` basis of cluster `j`.
+    fn basis(&self, j: usize) -> &[f32] {
+        let size = self.components * self.dim;
+        &self.bases[j * size..(j + 1) * size]
+    }
+
+    fn component(&self, j: usize, t: usize) -> &[f32] {
+        &self.basis(j)[t * self.dim..(t + 1) * self.dim]
+    }
+
+    fn set(&mut self, j: usize, mean: &[f32], basis: &[f32]) {
+        let size = self.components * self.dim;
+        self.means[j * self.dim..(j + 1) * self.dim].copy_from_slice(mean);
+        self.bases[j * size..(j + 1) * size].copy_from_slice(basis);
+    }
+}
+
 /// The loop of steps 2-5 on globally centred data.
 fn iterate(
-    x: &[f32],
-    n: usize,
-    d: usize,
-    options: &ClusterOptions,
+    x: Matrix,
+    options: &FactorizationOptions,
     progress: &dyn Progress,
 ) -> Result<(Factorization, FitStats)> {
+    let (n, d) = (x.rows, x.dim);
     let (k, c) = (options.clusters, options.components);
     let norms: Vec<f64> = x
+        .values
         .par_chunks(d)
         .map(|r| r.iter().map(|&v| f64::from(v) * f64::from(v)).sum())
         .collect();
     // Step 1: K distinct rows, empty bases.
     let mut rng = Pcg64Mcg::seed_from_u64(options.seed);
-    let mut means = vec![0.0f32; k * d];
     let mut picks: Vec<usize> = sample(&mut rng, n, k).into_vec();
     picks.sort_unstable();
-    for (j, &i) in picks.iter().enumerate() {
-        means[j * d..(j + 1) * d].copy_from_slice(&x[i * d..(i + 1) * d]);
-    }
-    let mut bases = vec![0.0f32; k * c * d];
+    let mut clusters = Clusters {
+        count: k,
+        components: c,
+        dim: d,
+        means: picks.iter().flat_map(|&i| x.row(i)).copied().collect(),
+        bases: vec![0.0f32; k * c * d],
+    };
     let mut stats = FitStats {
         iterations: 0,
         converged: false,
@@ -226,7 +377,7 @@ fn iterate(
     let single = k == 1;
     let max_iterations = if single { 1 } else { options.max_iterations };
     progress.start("clustering", max_iterations as u64 + 1);
-    let mut current = assign(x, &norms, n, d, &means, &bases, k, c);
+    let mut current = assign(x, &norms, &clusters);
     stats.error_history.push(current.mean_error());
     progress.advance(1);
     while stats.iterations < max_iterations {
@@ -234,10 +385,10 @@ fn iterate(
         let seed = options
             .seed
             .wrapping_add((stats.iterations as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15));
-        update(x, n, d, &current, &mut means, &mut bases, k, c, seed)?;
+        update(x, &current, &mut clusters, seed)?;
         stats.iterations += 1;
         // Step 2 with the new clusters.
-        current = assign(x, &norms, n, d, &means, &bases, k, c);
+        current = assign(x, &norms, &clusters);
         let (prev, now) = (
             stats.error_history.last().copied().unwrap_or(0.0),
             current.mean_error(),
@@ -257,8 +408,8 @@ fn iterate(
         Factorization {
             dim: d,
             components: c,
-            means,
-            bases,
+            means: clusters.means,
+            bases: clusters.bases,
             assignment: current.cluster.iter().map(|&j| j as u16).collect(),
             weights: current.weights,
         },
@@ -279,29 +430,22 @@ impl Assignment {
     }
 }
 
-/// Step 2: every row to the cluster reconstructing it best, with its weights and error.
-#[allow(clippy::too_many_arguments)]
-fn assign(
-    x: &[f32],
-    norms: &[f64],
-    n: usize,
-    d: usize,
-    means: &[f32],
-    bases: &[f32],
-    k: usize,
-    c: usize,
-) -> Assignment {
+/// Step 2: every row of `x` (with squared norms `norms`) to the cluster reconstructing it
+/// best, with its weights and error.
+fn assign(x: Matrix, norms: &[f64], clusters: &Clusters) -> Assignment {
+    let (n, d) = (x.rows, x.dim);
+    let (k, c) = (clusters.count, clusters.components);
     let rows = k * (c + 1);
     let mut m = Vec::with_capacity(rows * d);
-    m.extend_from_slice(means);
-    m.extend_from_slice(bases);
+    m.extend_from_slice(&clusters.means);
+    m.extend_from_slice(&clusters.bases);
     // Pᵀ = M Xᵀ (rows x n, column-major): each row's K(C+1) products are contiguous.
     let mut pt = Mat::<f32>::zeros(rows, n);
     matmul(
         pt.as_mut(),
         Accum::Replace,
         MatRef::from_row_major_slice(&m, rows, d),
-        MatRef::from_row_major_slice(x, n, d).transpose(),
+        MatRef::from_row_major_slice(x.values, n, d).transpose(),
         1.0f32,
         Par::rayon(0),
     );
@@ -313,13 +457,10 @@ fn assign(
             .sum()
     };
     let mm: Vec<f64> = (0..k)
-        .map(|j| dot(&means[j * d..(j + 1) * d], &means[j * d..(j + 1) * d]))
+        .map(|j| dot(clusters.mean(j), clusters.mean(j)))
         .collect();
     let me: Vec<f64> = (0..k * c)
-        .map(|t| {
-            let j = t / c;
-            dot(&means[j * d..(j + 1) * d], &bases[t * d..(t + 1) * d])
-        })
+        .map(|t| dot(clusters.mean(t / c), clusters.component(t / c, t % c)))
         .collect();
     let mut out = Assignment {
         cluster: vec![0; n],
@@ -363,19 +504,11 @@ fn assign(
     out
 }
 
-/// Steps 3 and 4: new means and bases from the current partition.
-#[allow(clippy::too_many_arguments)]
-fn update(
-    x: &[f32],
-    n: usize,
-    d: usize,
-    current: &Assignment,
-    means: &mut [f32],
-    bases: &mut [f32],
-    k: usize,
-    c: usize,
-    seed: u64,
-) -> Result<()> {
+/// Steps 3 and 4: new means and bases of `clusters` from the current partition of `x`
+/// (`seed` drives randomized PCA).
+fn update(x: Matrix, current: &Assignment, clusters: &mut Clusters, seed: u64) -> Result<()> {
+    let (n, d) = (x.rows, x.dim);
+    let (k, c) = (clusters.count, clusters.components);
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); k];
     for (i, &j) in current.cluster.iter().enumerate() {
         members[j as usize].push(i);
@@ -401,62 +534,41 @@ fn update(
         }
     }
     let big = |m: &Vec<usize>| m.len() == n || m.len() * d >= 1 << 24;
-    let fit = |j: usize, par: Par, warm: &[f32]| -> Result<(Vec<f32>, Vec<f32>)> {
+    let fit = |j: usize, par: Par| -> Result<(Vec<f32>, Vec<f32>)> {
         let rows = &members[j];
+        let warm = Some(clusters.basis(j));
         if rows.len() == n {
             // One cluster of everything: the data are centred on their mean already (up to
             // rounding), so they are decomposed in place, without a copy.
             let mean = vec![0.0f32; d];
-            let p = principal_directions(x, n, d, c, seed ^ j as u64, Some(warm), par)?;
+            let p = principal_directions(x.values, n, d, c, seed ^ j as u64, warm, par)?;
             return Ok((mean, p.basis));
         }
-        let mean = column_mean(x, n, d, rows);
+        let mean = x.mean_of(rows);
         let mut y = Vec::with_capacity(rows.len() * d);
         for &i in rows {
-            y.extend(
-                x[i * d..(i + 1) * d]
-                    .iter()
-                    .zip(&mean)
-                    .map(|(&v, &m)| v - m),
-            );
+            y.extend(x.row(i).iter().zip(&mean).map(|(&v, &m)| v - m));
         }
-        let p = principal_directions(&y, rows.len(), d, c, seed ^ j as u64, Some(warm), par)?;
+        let p = principal_directions(&y, rows.len(), d, c, seed ^ j as u64, warm, par)?;
         Ok((mean, p.basis))
     };
     let small: Vec<usize> = (0..k).filter(|&j| !big(&members[j])).collect();
     type Fitted = (usize, Result<(Vec<f32>, Vec<f32>)>);
-    let fitted: Vec<Fitted> = small
-        .par_iter()
-        .map(|&j| (j, fit(j, Par::Seq, &bases[j * c * d..(j + 1) * c * d])))
-        .collect();
+    let fitted: Vec<Fitted> = small.par_iter().map(|&j| (j, fit(j, Par::Seq))).collect();
     let mut results = Vec::with_capacity(k);
     for (j, r) in fitted {
         results.push((j, r?));
     }
     for j in (0..k).filter(|&j| big(&members[j])) {
-        let r = fit(j, Par::rayon(0), &bases[j * c * d..(j + 1) * c * d])?;
-        results.push((j, r));
+        results.push((j, fit(j, Par::rayon(0))?));
     }
     for (j, (mean, basis)) in results {
         if members[j].is_empty() {
             continue; // nothing to re-seed from (fewer rows than clusters cannot happen here)
         }
-        means[j * d..(j + 1) * d].copy_from_slice(&mean);
-        bases[j * c * d..(j + 1) * c * d].copy_from_slice(&basis);
+        clusters.set(j, &mean, &basis);
     }
     Ok(())
-}
-
-/// The mean of the listed rows, accumulated in f64.
-fn column_mean(x: &[f32], _n: usize, d: usize, rows: &[usize]) -> Vec<f32> {
-    let mut acc = vec![0.0f64; d];
-    for &i in rows {
-        acc.iter_mut()
-            .zip(&x[i * d..(i + 1) * d])
-            .for_each(|(a, &v)| *a += f64::from(v));
-    }
-    let count = rows.len().max(1) as f64;
-    acc.iter().map(|a| (a / count) as f32).collect()
 }
 
 #[cfg(test)]
@@ -486,8 +598,8 @@ mod tests {
         x
     }
 
-    fn options(k: usize, c: usize) -> ClusterOptions {
-        ClusterOptions {
+    fn options(k: usize, c: usize) -> FactorizationOptions {
+        FactorizationOptions {
             clusters: k,
             components: c,
             max_iterations: 30,
@@ -549,5 +661,56 @@ mod tests {
         let (f, s) = fit_rows(&x, 4, 5, &options(2, 2), &NoProgress).unwrap();
         assert_eq!(s.final_error(), 0.0);
         assert_eq!(f.row(3), vec![0.0; 5]);
+    }
+
+    #[test]
+    fn accessors_agree_with_the_documented_layout() {
+        // K = 2, C = 2, d = 3, n = 3.
+        let means = vec![0.0, 1.0, 2.0, 10.0, 11.0, 12.0];
+        let bases: Vec<f32> = (0..12).map(|v| v as f32 * 0.5).collect();
+        let weights = vec![1.0, 0.0, 0.0, 1.0, 2.0, -1.0];
+        let f = Factorization::new(3, 2, means, bases, vec![1, 0, 1], weights).unwrap();
+        assert_eq!(
+            (f.clusters(), f.items(), f.components(), f.dim()),
+            (2, 3, 2, 3)
+        );
+        assert_eq!(f.mean(1), &[10.0, 11.0, 12.0]);
+        assert_eq!(f.component(1, 0), &[3.0, 3.5, 4.0]);
+        assert_eq!(f.component(0, 1), &[1.5, 2.0, 2.5]);
+        assert_eq!((f.cluster_of(2), f.weights_of(2)), (1, &[2.0, -1.0][..]));
+        // Row 0: cluster 1, weights (1, 0): mean(1) + component(1, 0).
+        assert_eq!(f.row(0), vec![13.0, 14.5, 16.0]);
+        let terms: Vec<[f32; 3]> = f.rgb_terms(1, 0).collect();
+        assert_eq!(
+            terms,
+            vec![[10.0, 11.0, 12.0], [3.0, 3.5, 4.0], [4.5, 5.0, 5.5]]
+        );
+    }
+
+    #[test]
+    fn arrays_that_do_not_fit_together_are_refused() {
+        let ok = |m: usize, b: usize, a: Vec<u16>, w: usize| {
+            Factorization::new(3, 2, vec![0.0; m], vec![0.0; b], a, vec![0.0; w])
+        };
+        ok(6, 12, vec![0, 1, 1], 6).unwrap();
+        assert!(ok(5, 12, vec![0, 1, 1], 6).unwrap_err().contains("mean"));
+        assert!(ok(6, 11, vec![0, 1, 1], 6).unwrap_err().contains("basis"));
+        assert!(ok(6, 12, vec![0, 1, 1], 5).unwrap_err().contains("weights"));
+        assert!(
+            ok(6, 12, vec![0, 2, 1], 6)
+                .unwrap_err()
+                .contains("cluster index 2")
+        );
+        assert!(
+            ok(6, 12, vec![0], 2)
+                .unwrap_err()
+                .contains("2 clusters for 1")
+        );
+        assert!(ok(0, 0, vec![], 0).is_err());
+        assert!(
+            Factorization::new(3, 4, vec![0.0; 3], vec![0.0; 12], vec![0], vec![0.0; 4])
+                .unwrap_err()
+                .contains("components")
+        );
     }
 }

@@ -15,9 +15,41 @@
 use ndarray::Array3;
 use rayon::prelude::*;
 
+use super::Method;
 use super::error::{LpcaError, Result};
 use crate::btf::Btf;
 use crate::progress::Progress;
+
+/// How a method arranges a BTF into factorizations (the arrangements above): how many, and
+/// the rows and vector length of each.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Layout {
+    /// Factorizations: 1, or one per view for PCA RF.
+    pub parts: usize,
+    /// Rows per factorization: texels, or images for PCA BTF.
+    pub rows: usize,
+    /// Values per row.
+    pub dim: usize,
+}
+
+impl Layout {
+    /// The layout of a `width x height` BTF with `views` and `lights` under `method`.
+    pub(crate) fn of(
+        method: Method,
+        width: usize,
+        height: usize,
+        views: usize,
+        lights: usize,
+    ) -> Self {
+        let texels = width * height;
+        let (parts, rows, dim) = match method {
+            Method::Lpca => (1, texels, views * lights * 3),
+            Method::PcaBtf => (1, views * lights, 3 * texels),
+            Method::PcaRf => (views, texels, lights * 3),
+        };
+        Self { parts, rows, dim }
+    }
+}
 
 /// A zeroed `len`-element buffer, or a clear error instead of an abort when memory is short.
 pub(crate) fn zeroed(len: usize, what: &str) -> Result<Vec<f32>> {
@@ -149,6 +181,22 @@ pub(crate) fn gather_view(
         .collect()
 }
 
+/// The images of one view back out of the image-wise matrix ([`image_matrix`]): `lights`
+/// planar `(3, height, width)` images.
+pub(crate) fn gather_images(
+    rows: &[f32],
+    view: usize,
+    lights: usize,
+    height: usize,
+    width: usize,
+) -> Vec<Array3<f32>> {
+    let d = 3 * height * width;
+    rows[view * lights * d..(view + 1) * lights * d]
+        .chunks_exact(d)
+        .map(|row| Array3::from_shape_vec((3, height, width), row.to_vec()).expect("shape"))
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -199,5 +247,7 @@ mod tests {
         assert_eq!(rf[5 * 9 + 2 * 3 + 1], btf.image(1, 2).unwrap()[(1, 1, 1)]);
         let back = gather_view(&x, d, 9, 3, 2, 4);
         assert_eq!(back[2], btf.image(1, 2).unwrap());
+        let images = gather_images(&imgs, 1, 3, 2, 4);
+        assert_eq!(images[2], btf.image(1, 2).unwrap());
     }
 }

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use crate::btf::BtfError;
+use crate::io::IoError;
 
 /// Result alias for the local-PCA area.
 pub type Result<T, E = LpcaError> = std::result::Result<T, E>;
@@ -12,9 +13,12 @@ pub type Result<T, E = LpcaError> = std::result::Result<T, E>;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum LpcaError {
-    /// Reading the BTF (or writing a file) failed.
+    /// Reading the BTF failed.
     #[error(transparent)]
     Btf(#[from] BtfError),
+    /// Reading or writing a model file failed.
+    #[error(transparent)]
+    Io(#[from] IoError),
     /// A `.lpca` file is corrupt, truncated, of another version, or hostile.
     #[error("{}: {reason}", path.display())]
     Format {

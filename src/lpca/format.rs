@@ -10,9 +10,12 @@ use std::path::Path;
 use half::f16;
 
 use super::cluster::Factorization;
+use super::data::Layout;
 use super::error::{LpcaError, Result};
 use super::{LpcaModel, Method};
-use crate::btf::{Direction, DirectionSet, io};
+use crate::btf::DirectionSet;
+use crate::io::bytes::{Parse, Reader};
+use crate::io::envelope;
 
 /// The four bytes every `.lpca` file starts with.
 pub const MAGIC: [u8; 4] = *b"LPCA";
@@ -31,23 +34,6 @@ fn method_code(m: Method) -> u8 {
     }
 }
 
-/// Rows and row length of the factorizations of a model of this shape, and how many there
-/// are.
-fn shape(
-    method: Method,
-    width: usize,
-    height: usize,
-    nv: usize,
-    nl: usize,
-) -> (usize, usize, usize) {
-    let n = width * height;
-    match method {
-        Method::Lpca => (1, n, nv * nl * 3),
-        Method::PcaBtf => (1, nv * nl, 3 * n),
-        Method::PcaRf => (nv, n, nl * 3),
-    }
-}
-
 /// The payload length, bytes, of a model of this shape with `clusters` clusters per
 /// factorization (saturating; compare with [`MAX_PAYLOAD`]).
 pub fn payload_len(
@@ -59,8 +45,9 @@ pub fn payload_len(
     clusters: usize,
     components: usize,
 ) -> u64 {
-    let (count, rows, dim) = shape(method, width, height, views, lights);
-    let [count, rows, dim, k, c] = [count, rows, dim, clusters, components].map(|v| v as u64);
+    let layout = Layout::of(method, width, height, views, lights);
+    let [count, rows, dim, k, c] =
+        [layout.parts, layout.rows, layout.dim, clusters, components].map(|v| v as u64);
     let indices = if k > 1 { 2 * rows } else { 0 };
     let part = 2 + 2 * k.saturating_mul(c + 1).saturating_mul(dim) + indices + 2 * rows * c;
     1 + 4 + 4 + 2 + 2 + 8 * views as u64 + 2 + 8 * lights as u64 + count.saturating_mul(part)
@@ -90,100 +77,26 @@ pub fn to_bytes(model: &LpcaModel) -> Vec<u8> {
         }
     };
     for f in model.parts() {
-        p.extend_from_slice(&(f.clusters() as u16).to_le_bytes());
-        halves(&mut p, &f.means);
-        halves(&mut p, &f.bases);
-        if f.clusters() > 1 {
-            for &a in &f.assignment {
+        let (k, c) = (f.clusters(), f.components());
+        p.extend_from_slice(&(k as u16).to_le_bytes());
+        for j in 0..k {
+            halves(&mut p, f.mean(j));
+        }
+        for j in 0..k {
+            for t in 0..c {
+                halves(&mut p, f.component(j, t));
+            }
+        }
+        if k > 1 {
+            for &a in f.assignment() {
                 p.extend_from_slice(&a.to_le_bytes());
             }
         }
-        halves(&mut p, &f.weights);
+        halves(&mut p, f.weights());
     }
-    let mut out = Vec::with_capacity(p.len() + 16);
-    out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&VERSION.to_le_bytes());
-    out.extend_from_slice(&0u16.to_le_bytes());
-    // A payload over the limit (checked by `write` and before fitting) is marked as such, so
-    // that no reader accepts a wrapped length.
-    out.extend_from_slice(&u32::try_from(p.len()).unwrap_or(u32::MAX).to_le_bytes());
-    out.extend_from_slice(&p);
-    out.extend_from_slice(&crc32fast::hash(&p).to_le_bytes());
-    out
-}
-
-type Parse<T> = std::result::Result<T, String>;
-
-/// Reads from a byte slice; every read checks the remaining length first.
-struct Reader<'a> {
-    bytes: &'a [u8],
-    pos: usize,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Parse<&'a [u8]> {
-        if self.bytes.len() - self.pos < n {
-            return Err(format!("truncated at byte {} (wanted {n} more)", self.pos));
-        }
-        let s = &self.bytes[self.pos..self.pos + n];
-        self.pos += n;
-        Ok(s)
-    }
-    fn u8(&mut self) -> Parse<u8> {
-        Ok(self.take(1)?[0])
-    }
-    fn u16(&mut self) -> Parse<u16> {
-        Ok(u16::from_le_bytes(
-            self.take(2)?.try_into().expect("2 bytes"),
-        ))
-    }
-    fn u32(&mut self) -> Parse<u32> {
-        Ok(u32::from_le_bytes(
-            self.take(4)?.try_into().expect("4 bytes"),
-        ))
-    }
-    fn f32(&mut self) -> Parse<f32> {
-        Ok(f32::from_le_bytes(
-            self.take(4)?.try_into().expect("4 bytes"),
-        ))
-    }
-    /// Checks that `count` items of `size` bytes fit in what is left, before allocating.
-    fn ensure(&self, count: usize, size: usize, what: &str) -> Parse<()> {
-        match count.checked_mul(size) {
-            Some(b) if b <= self.bytes.len() - self.pos => Ok(()),
-            _ => Err(format!(
-                "{what}: {count} values at byte {} exceed the file",
-                self.pos
-            )),
-        }
-    }
-    fn halves(&mut self, count: usize, what: &str) -> Parse<Vec<f32>> {
-        self.ensure(count, 2, what)?;
-        let raw = self.take(count * 2)?;
-        raw.chunks_exact(2)
-            .map(|b| {
-                let v = f16::from_bits(u16::from_le_bytes([b[0], b[1]]));
-                if v.is_finite() {
-                    Ok(v.to_f32())
-                } else {
-                    Err(format!("{what}: a non-finite number"))
-                }
-            })
-            .collect()
-    }
-    fn directions(&mut self, what: &str) -> Parse<DirectionSet> {
-        let count = usize::from(self.u16()?);
-        self.ensure(count, 8, what)?;
-        let dirs = (0..count)
-            .map(|_| {
-                Ok(Direction::new(
-                    f64::from(self.f32()?),
-                    f64::from(self.f32()?),
-                ))
-            })
-            .collect::<Parse<Vec<_>>>()?;
-        DirectionSet::new(dirs).map_err(|e| format!("{what}: {e}"))
-    }
+    // A payload over the limit (checked by `write` and before fitting) gets a length no
+    // reader accepts ([`envelope::seal`]).
+    envelope::seal(MAGIC, VERSION, &p)
 }
 
 /// Parses a model from bytes; `path` is only used in messages.
@@ -205,11 +118,8 @@ pub fn is_lpca(bytes: &[u8]) -> bool {
 }
 
 fn parse(bytes: &[u8]) -> Parse<LpcaModel> {
-    let payload = crate::btf::io::envelope::open(bytes, MAGIC, ".lpca", VERSION, MAX_PAYLOAD)?;
-    let mut r = Reader {
-        bytes: payload,
-        pos: 0,
-    };
+    let payload = envelope::open(bytes, MAGIC, ".lpca", VERSION, MAX_PAYLOAD)?;
+    let mut r = Reader::new(payload);
     let method = match r.u8()? {
         0 => Method::Lpca,
         1 => Method::PcaBtf,
@@ -224,17 +134,18 @@ fn parse(bytes: &[u8]) -> Parse<LpcaModel> {
         ));
     }
     let components = usize::from(r.u16()?);
-    let views = r.directions("view directions")?;
-    let lights = r.directions("light directions")?;
+    let views = DirectionSet::read_le(&mut r, "view directions")?;
+    let lights = DirectionSet::read_le(&mut r, "light directions")?;
     let (w, h) = (width as usize, height as usize);
-    let (count, items, dim) = shape(method, w, h, views.len(), lights.len());
+    let layout = Layout::of(method, w, h, views.len(), lights.len());
+    let (items, dim) = (layout.rows, layout.dim);
     if components == 0 || components > dim {
         return Err(format!(
             "{components} components for vectors of {dim} values"
         ));
     }
-    let mut parts = Vec::with_capacity(count.min(u16::MAX as usize));
-    for part in 0..count {
+    let mut parts = Vec::with_capacity(layout.parts.min(u16::MAX as usize));
+    for part in 0..layout.parts {
         let what = |s: &str| format!("part {part}: {s}");
         let clusters = usize::from(r.u16()?);
         if clusters == 0 || clusters > items || (method != Method::Lpca && clusters != 1) {
@@ -249,38 +160,18 @@ fn parse(bytes: &[u8]) -> Parse<LpcaModel> {
             &what("eigenvectors"),
         )?;
         let assignment = if clusters > 1 {
-            r.ensure(items, 2, &what("cluster indices"))?;
-            let raw = r.take(items * 2)?;
-            let a: Vec<u16> = raw
-                .chunks_exact(2)
-                .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                .collect();
-            if let Some(bad) = a.iter().find(|&&k| usize::from(k) >= clusters) {
-                return Err(what(&format!("cluster index {bad} of {clusters} clusters")));
-            }
-            a
+            r.u16s(items, &what("cluster indices"))?
         } else {
             // Nothing is allocated for a size the file cannot hold: the weights come next.
             r.ensure(items, 2 * components, &what("weights"))?;
             vec![0; items]
         };
         let weights = r.halves(items.saturating_mul(components), &what("weights"))?;
-        parts.push(Factorization {
-            dim,
-            components,
-            means,
-            bases,
-            assignment,
-            weights,
-        });
+        let f = Factorization::new(dim, components, means, bases, assignment, weights);
+        parts.push(f.map_err(|reason| what(&reason))?);
     }
-    if r.pos != payload.len() {
-        return Err(format!(
-            "{} unexpected bytes at the end of the payload",
-            payload.len() - r.pos
-        ));
-    }
-    Ok(LpcaModel::from_parts(method, views, lights, w, h, parts))
+    r.finish()?;
+    LpcaModel::from_parts(method, views, lights, (w, h), parts)
 }
 
 /// Writes a model file atomically (a temporary name, then a rename).
@@ -289,7 +180,7 @@ fn parse(bytes: &[u8]) -> Parse<LpcaModel> {
 /// The destination cannot be written.
 pub fn write(model: &LpcaModel, path: &Path) -> Result<()> {
     let bytes = to_bytes(model);
-    if bytes.len() - 16 > MAX_PAYLOAD as usize {
+    if bytes.len() - envelope::OVERHEAD > MAX_PAYLOAD as usize {
         return Err(LpcaError::Format {
             path: path.to_path_buf(),
             reason: format!(
@@ -298,7 +189,7 @@ pub fn write(model: &LpcaModel, path: &Path) -> Result<()> {
             ),
         });
     }
-    Ok(io::write_file_atomic(path, &bytes)?)
+    Ok(crate::io::write_file_atomic(path, &bytes)?)
 }
 
 /// Reads a model file (at most [`MAX_PAYLOAD`] + 16 bytes are read).
@@ -306,13 +197,8 @@ pub fn write(model: &LpcaModel, path: &Path) -> Result<()> {
 /// # Errors
 /// The file cannot be read, or is not a valid model.
 pub fn read(path: &Path) -> Result<LpcaModel> {
-    use std::io::Read;
-    let io_error = |e| LpcaError::Btf(crate::btf::BtfError::io(path, e));
-    let file = std::fs::File::open(path).map_err(io_error)?;
-    let mut bytes = Vec::new();
-    file.take(u64::from(MAX_PAYLOAD) + 17)
-        .read_to_end(&mut bytes)
-        .map_err(io_error)?;
+    let limit = u64::from(MAX_PAYLOAD) + envelope::OVERHEAD as u64;
+    let bytes = crate::io::read_capped(path, limit)?;
     from_bytes(&bytes, path)
 }
 
@@ -466,7 +352,7 @@ mod tests {
         // A cluster index out of range.
         let model = &models()[0];
         let f = &model.parts()[0];
-        let at = offset + 2 + 2 * (f.means.len() + f.bases.len());
+        let at = offset + 2 + 2 * f.clusters() * (f.components() + 1) * f.dim();
         let index = repack(&bytes, |p| {
             p[at..at + 2].copy_from_slice(&100u16.to_le_bytes())
         });

@@ -43,12 +43,14 @@ use std::time::Instant;
 use ndarray::Array3;
 use rayon::prelude::*;
 
-pub use cluster::{ClusterOptions, Factorization, FitStats, fit_rows};
+pub use cluster::{Factorization, FactorizationOptions, FitStats, fit_rows};
 pub use error::{LpcaError, Result};
+
+use data::Layout;
 
 use crate::btf::{Btf, BtfError, Direction, DirectionSet, ImageSource};
 use crate::color::{Srgb8Encoder, delta_e76, linear_to_lab, srgb8_to_linear_table};
-use crate::progress::Progress;
+use crate::progress::{NoProgress, Progress};
 
 /// The most principal components per cluster accepted.
 pub const MAX_COMPONENTS: usize = 1024;
@@ -172,162 +174,12 @@ impl LpcaModel {
         options: &LpcaOptions,
         progress: &dyn Progress,
     ) -> Result<(LpcaModel, LpcaReport)> {
-        let (w, h) = (btf.width() as usize, btf.height() as usize);
-        let (nv, nl) = (btf.views().len(), btf.lights().len());
-        let n = w * h;
-        let mut report = LpcaReport {
-            method: options.method,
-            clusters: if options.method == Method::Lpca {
-                options.clusters
-            } else {
-                1
-            },
-            components: options.components,
-            iterations: 0,
-            converged: true,
-            error_history: Vec::new(),
-            load_seconds: 0.0,
-            fit_seconds: 0.0,
-            evaluation_seconds: 0.0,
-            mean_delta_e: f64::NAN,
-            psnr_db: f64::NAN,
-            per_view_delta_e: Vec::new(),
-            per_image_delta_e: Vec::new(),
-        };
-        if options.components > MAX_COMPONENTS {
-            return Err(LpcaError::parameter(
-                "--components",
-                format!("{} is above {MAX_COMPONENTS}", options.components),
-            ));
-        }
-        let limit = usize::from(u16::MAX);
-        if nv > limit || nl > limit {
-            return Err(LpcaError::parameter(
-                "btf",
-                format!("{nv} views x {nl} lights: a .lpca model holds at most {limit} of each"),
-            ));
-        }
-        if report.clusters > limit {
-            return Err(LpcaError::parameter(
-                "--clusters",
-                format!("{} is above {limit}", report.clusters),
-            ));
-        }
-        let payload = |clusters| {
-            format::payload_len(options.method, w, h, nv, nl, clusters, options.components)
-        };
-        let bytes = payload(report.clusters);
-        if bytes > u64::from(format::MAX_PAYLOAD) {
-            // Blame the option that alone would make it fit, if one does.
-            let option = if report.clusters > 1 && payload(1) <= u64::from(format::MAX_PAYLOAD) {
-                "--clusters"
-            } else {
-                "--components"
-            };
-            return Err(LpcaError::parameter(
-                option,
-                format!(
-                    "the model would take {bytes} bytes, above the .lpca limit of {} bytes; \
-                     use fewer clusters or components",
-                    format::MAX_PAYLOAD
-                ),
-            ));
-        }
-        let cluster_options = ClusterOptions {
-            clusters: report.clusters,
-            components: options.components,
-            max_iterations: options.max_iterations,
-            tolerance: options.tolerance,
-            seed: options.seed,
-        };
-        let mut model = LpcaModel {
-            method: options.method,
-            views: btf.views().clone(),
-            lights: btf.lights().clone(),
-            width: w,
-            height: h,
-            parts: Vec::new(),
-        };
-        let mut scores = Scores::new(nv * nl);
+        let job = Job::new(btf, options)?;
         match options.method {
-            Method::Lpca | Method::PcaBtf => {
-                let t = Instant::now();
-                let (x, rows, d) = if options.method == Method::Lpca {
-                    (data::brdf_matrix(btf, progress)?, n, nv * nl * 3)
-                } else {
-                    (data::image_matrix(btf, progress)?, nv * nl, 3 * n)
-                };
-                report.load_seconds = t.elapsed().as_secs_f64();
-                let t = Instant::now();
-                let (mut f, stats) = fit_rows(&x, rows, d, &cluster_options, progress)?;
-                f.round_to_half();
-                report.fit_seconds = t.elapsed().as_secs_f64();
-                report.iterations = stats.iterations;
-                report.converged = stats.converged;
-                report.error_history = stats.error_history;
-                model.parts.push(f);
-                if options.evaluate {
-                    let t = Instant::now();
-                    progress.start("measuring error", nv as u64);
-                    for v in 0..nv {
-                        let inputs = if options.method == Method::Lpca {
-                            data::gather_view(&x, d, v * nl * 3, nl, h, w)
-                        } else {
-                            (0..nl)
-                                .map(|l| {
-                                    let a = v * nl + l;
-                                    Array3::from_shape_vec(
-                                        (3, h, w),
-                                        x[a * d..(a + 1) * d].to_vec(),
-                                    )
-                                    .expect("shape")
-                                })
-                                .collect()
-                        };
-                        scores.view(&model, v, &inputs)?;
-                        progress.advance(1);
-                    }
-                    progress.finish();
-                    report.evaluation_seconds = t.elapsed().as_secs_f64();
-                }
-            }
-            Method::PcaRf => {
-                progress.start("per-view PCA", nv as u64);
-                let mut errors = Vec::with_capacity(nv);
-                for v in 0..nv {
-                    let t = Instant::now();
-                    let x = data::view_matrix(btf, v)?;
-                    report.load_seconds += t.elapsed().as_secs_f64();
-                    let t = Instant::now();
-                    let (mut f, stats) = fit_rows(
-                        &x,
-                        n,
-                        nl * 3,
-                        &cluster_options,
-                        &crate::progress::NoProgress,
-                    )?;
-                    f.round_to_half();
-                    report.fit_seconds += t.elapsed().as_secs_f64();
-                    report.iterations = report.iterations.max(stats.iterations);
-                    errors.push(stats.final_error());
-                    model.parts.push(f);
-                    if options.evaluate {
-                        let t = Instant::now();
-                        let inputs = data::gather_view(&x, nl * 3, 0, nl, h, w);
-                        scores.view(&model, v, &inputs)?;
-                        report.evaluation_seconds += t.elapsed().as_secs_f64();
-                    }
-                    progress.advance(1);
-                }
-                progress.finish();
-                // Per-view errors summed: the error of a whole texel vector across views.
-                report.error_history = vec![errors.iter().sum()];
-            }
+            Method::Lpca => job.fit_lpca(btf, progress),
+            Method::PcaBtf => job.fit_pca_btf(btf, progress),
+            Method::PcaRf => job.fit_pca_rf(btf, progress),
         }
-        if options.evaluate {
-            scores.finish(&mut report, nv, nl);
-        }
-        Ok((model, report))
     }
 
     /// The factorization.
@@ -362,20 +214,12 @@ impl LpcaModel {
 
     /// Components per cluster.
     pub fn components(&self) -> usize {
-        self.parts.first().map_or(0, |f| f.components)
+        self.parts.first().map_or(0, Factorization::components)
     }
 
     /// The factorizations: one for LPCA and PCA BTF, one per view for PCA RF.
     pub fn parts(&self) -> &[Factorization] {
         &self.parts
-    }
-
-    /// The cluster of every texel, row-major `height x width` (LPCA; all zero otherwise).
-    pub fn cluster_map(&self) -> Vec<u16> {
-        match self.method {
-            Method::Lpca => self.parts[0].assignment.clone(),
-            _ => vec![0; self.width * self.height],
-        }
     }
 
     /// Image (view, light) rebuilt from the model: planar `(3, height, width)` linear RGB,
@@ -401,18 +245,12 @@ impl LpcaModel {
                 } else {
                     (&self.parts[view], light * 3)
                 };
-                let (d, c, k) = (f.dim, f.components, f.clusters());
                 // Per cluster, the (C + 1) x 3 numbers this image needs.
-                let mut table = vec![0.0f32; k * (c + 1) * 3];
-                for j in 0..k {
-                    for ch in 0..3 {
-                        table[(j * (c + 1)) * 3 + ch] = f.means[j * d + col + ch];
-                        for t in 0..c {
-                            table[(j * (c + 1) + 1 + t) * 3 + ch] =
-                                f.bases[(j * c + t) * d + col + ch];
-                        }
-                    }
-                }
+                let terms = f.components() + 1;
+                let table: Vec<f32> = (0..f.clusters())
+                    .flat_map(|j| f.rgb_terms(j, col))
+                    .flatten()
+                    .collect();
                 let (r, rest) = out.split_at_mut(npx);
                 let (g, b) = rest.split_at_mut(npx);
                 r.par_iter_mut()
@@ -420,10 +258,10 @@ impl LpcaModel {
                     .zip(b.par_iter_mut())
                     .enumerate()
                     .for_each(|(x, ((r, g), b))| {
-                        let j = usize::from(f.assignment[x]);
-                        let tab = &table[j * (c + 1) * 3..(j + 1) * (c + 1) * 3];
+                        let j = f.cluster_of(x);
+                        let tab = &table[j * terms * 3..(j + 1) * terms * 3];
                         let mut acc = [tab[0], tab[1], tab[2]];
-                        for (t, &wt) in f.weights[x * c..(x + 1) * c].iter().enumerate() {
+                        for (t, &wt) in f.weights_of(x).iter().enumerate() {
                             for ch in 0..3 {
                                 acc[ch] += wt * tab[(1 + t) * 3 + ch];
                             }
@@ -434,14 +272,14 @@ impl LpcaModel {
                     });
             }
             Method::PcaBtf => {
+                // One row per image: the image is the row's reconstruction, planar.
                 let f = &self.parts[0];
-                let (d, c) = (f.dim, f.components);
-                let a = view * nl + light;
-                let wts = &f.weights[a * c..(a + 1) * c];
+                let (mean, wts) = (f.mean(0), f.weights_of(view * nl + light));
+                let basis: Vec<&[f32]> = (0..f.components()).map(|t| f.component(0, t)).collect();
                 out.par_iter_mut().enumerate().for_each(|(i, o)| {
-                    let mut v = f.means[i];
-                    for (t, &wt) in wts.iter().enumerate() {
-                        v += wt * f.bases[t * d + i];
+                    let mut v = mean[i];
+                    for (&wt, e) in wts.iter().zip(&basis) {
+                        v += wt * e[i];
                     }
                     *o = v.max(0.0);
                 });
@@ -491,7 +329,7 @@ impl LpcaModel {
             lights,
             w,
             h,
-            Box::new(ModelSource(Arc::new(self))),
+            Box::new(Reconstruction(Arc::new(self))),
         )?)
     }
 
@@ -508,29 +346,270 @@ impl LpcaModel {
         format::from_bytes(bytes, path)
     }
 
-    /// Builds a model from parts, checking that they fit together (used by the file reader).
+    /// Builds a model from parts, checking that they fit together (used by the file reader):
+    /// as many factorizations as `method` keeps for this shape, each of the row count and
+    /// vector length the method arranges the BTF into ([`data`]), one component count, and one
+    /// cluster each except for LPCA.
+    ///
+    /// # Errors
+    /// The reason the parts do not fit.
     pub(crate) fn from_parts(
         method: Method,
         views: DirectionSet,
         lights: DirectionSet,
-        width: usize,
-        height: usize,
+        (width, height): (usize, usize),
         parts: Vec<Factorization>,
-    ) -> Self {
-        Self {
+    ) -> std::result::Result<Self, String> {
+        let layout = Layout::of(method, width, height, views.len(), lights.len());
+        if parts.len() != layout.parts {
+            return Err(format!(
+                "{} factorizations for a {} model of {} views (expected {})",
+                parts.len(),
+                method.name(),
+                views.len(),
+                layout.parts
+            ));
+        }
+        let components = parts.first().map_or(0, Factorization::components);
+        for (i, f) in parts.iter().enumerate() {
+            if f.items() != layout.rows || f.dim() != layout.dim {
+                return Err(format!(
+                    "part {i}: {} vectors of {} values where a {} model of {width}x{height} \
+                     texels, {} views and {} lights has {} of {}",
+                    f.items(),
+                    f.dim(),
+                    method.name(),
+                    views.len(),
+                    lights.len(),
+                    layout.rows,
+                    layout.dim
+                ));
+            }
+            if f.components() != components {
+                return Err(format!(
+                    "part {i}: {} components where part 0 has {components}",
+                    f.components()
+                ));
+            }
+            if method != Method::Lpca && f.clusters() != 1 {
+                return Err(format!(
+                    "part {i}: {} clusters in a {} model (one expected)",
+                    f.clusters(),
+                    method.name()
+                ));
+            }
+        }
+        Ok(Self {
             method,
             views,
             lights,
             width,
             height,
             parts,
-        }
+        })
     }
 }
 
-struct ModelSource(Arc<LpcaModel>);
+/// One fit: the checked options, the model being built and the report being filled.
+struct Job {
+    options: LpcaOptions,
+    factorization: FactorizationOptions,
+    model: LpcaModel,
+    report: LpcaReport,
+}
 
-impl ImageSource for ModelSource {
+impl Job {
+    /// Checks `options` against `btf` and the `.lpca` limits before any image is read.
+    fn new(btf: &Btf, options: &LpcaOptions) -> Result<Self> {
+        let (w, h) = (btf.width() as usize, btf.height() as usize);
+        let (nv, nl) = (btf.views().len(), btf.lights().len());
+        let clusters = if options.method == Method::Lpca {
+            options.clusters
+        } else {
+            1
+        };
+        if options.components > MAX_COMPONENTS {
+            return Err(LpcaError::parameter(
+                "--components",
+                format!("{} is above {MAX_COMPONENTS}", options.components),
+            ));
+        }
+        let limit = usize::from(u16::MAX);
+        if nv > limit || nl > limit {
+            return Err(LpcaError::parameter(
+                "btf",
+                format!("{nv} views x {nl} lights: a .lpca model holds at most {limit} of each"),
+            ));
+        }
+        if clusters > limit {
+            return Err(LpcaError::parameter(
+                "--clusters",
+                format!("{clusters} is above {limit}"),
+            ));
+        }
+        let payload = |clusters| {
+            format::payload_len(options.method, w, h, nv, nl, clusters, options.components)
+        };
+        let bytes = payload(clusters);
+        if bytes > u64::from(format::MAX_PAYLOAD) {
+            // Blame the option that alone would make it fit, if one does.
+            let option = if clusters > 1 && payload(1) <= u64::from(format::MAX_PAYLOAD) {
+                "--clusters"
+            } else {
+                "--components"
+            };
+            return Err(LpcaError::parameter(
+                option,
+                format!(
+                    "the model would take {bytes} bytes, above the .lpca limit of {} bytes; \
+                     use fewer clusters or components",
+                    format::MAX_PAYLOAD
+                ),
+            ));
+        }
+        Ok(Self {
+            options: *options,
+            factorization: FactorizationOptions {
+                clusters,
+                components: options.components,
+                max_iterations: options.max_iterations,
+                tolerance: options.tolerance,
+                seed: options.seed,
+            },
+            model: LpcaModel {
+                method: options.method,
+                views: btf.views().clone(),
+                lights: btf.lights().clone(),
+                width: w,
+                height: h,
+                parts: Vec::new(),
+            },
+            report: LpcaReport {
+                method: options.method,
+                clusters,
+                components: options.components,
+                iterations: 0,
+                converged: true,
+                error_history: Vec::new(),
+                load_seconds: 0.0,
+                fit_seconds: 0.0,
+                evaluation_seconds: 0.0,
+                mean_delta_e: f64::NAN,
+                psnr_db: f64::NAN,
+                per_view_delta_e: Vec::new(),
+                per_image_delta_e: Vec::new(),
+            },
+        })
+    }
+
+    /// (views, lights, height, width) of the model.
+    fn shape(&self) -> (usize, usize, usize, usize) {
+        let m = &self.model;
+        (m.views.len(), m.lights.len(), m.height, m.width)
+    }
+
+    /// Local PCA: one factorization of the BRDF-wise matrix (one row per texel).
+    fn fit_lpca(mut self, btf: &Btf, progress: &dyn Progress) -> Result<(LpcaModel, LpcaReport)> {
+        let (nv, nl, h, w) = self.shape();
+        let t = Instant::now();
+        let x = data::brdf_matrix(btf, progress)?;
+        self.report.load_seconds = t.elapsed().as_secs_f64();
+        let d = nv * nl * 3;
+        self.fit_whole(&x, (h * w, d), progress, |v| {
+            data::gather_view(&x, d, v * nl * 3, nl, h, w)
+        })
+    }
+
+    /// PCA BTF: one factorization of the image-wise matrix (one row per image).
+    fn fit_pca_btf(
+        mut self,
+        btf: &Btf,
+        progress: &dyn Progress,
+    ) -> Result<(LpcaModel, LpcaReport)> {
+        let (nv, nl, h, w) = self.shape();
+        let t = Instant::now();
+        let x = data::image_matrix(btf, progress)?;
+        self.report.load_seconds = t.elapsed().as_secs_f64();
+        let d = 3 * h * w;
+        self.fit_whole(&x, (nv * nl, d), progress, |v| {
+            data::gather_images(&x, v, nl, h, w)
+        })
+    }
+
+    /// The shared tail of [`Self::fit_lpca`] and [`Self::fit_pca_btf`]: factorizes the `rows x
+    /// d` matrix `x` whole, then measures every view against `inputs(view)`, the view's
+    /// measured images taken back out of `x`.
+    fn fit_whole(
+        mut self,
+        x: &[f32],
+        (rows, d): (usize, usize),
+        progress: &dyn Progress,
+        inputs: impl Fn(usize) -> Vec<Array3<f32>>,
+    ) -> Result<(LpcaModel, LpcaReport)> {
+        let t = Instant::now();
+        let (mut f, stats) = fit_rows(x, rows, d, &self.factorization, progress)?;
+        f.round_to_half();
+        self.report.fit_seconds = t.elapsed().as_secs_f64();
+        self.report.iterations = stats.iterations;
+        self.report.converged = stats.converged;
+        self.report.error_history = stats.error_history;
+        self.model.parts.push(f);
+        if self.options.evaluate {
+            let (nv, nl, _, _) = self.shape();
+            let t = Instant::now();
+            let mut scores = Scores::new(nv * nl);
+            progress.start("measuring error", nv as u64);
+            for v in 0..nv {
+                scores.view(&self.model, v, &inputs(v))?;
+                progress.advance(1);
+            }
+            progress.finish();
+            self.report.evaluation_seconds = t.elapsed().as_secs_f64();
+            scores.finish(&mut self.report, nv, nl);
+        }
+        Ok((self.model, self.report))
+    }
+
+    /// PCA RF: one single-cluster factorization per view of its reflectance fields, one view
+    /// in memory at a time.
+    fn fit_pca_rf(mut self, btf: &Btf, progress: &dyn Progress) -> Result<(LpcaModel, LpcaReport)> {
+        let (nv, nl, h, w) = self.shape();
+        let mut scores = Scores::new(nv * nl);
+        progress.start("per-view PCA", nv as u64);
+        let mut errors = Vec::with_capacity(nv);
+        for v in 0..nv {
+            let t = Instant::now();
+            let x = data::view_matrix(btf, v)?;
+            self.report.load_seconds += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            let (mut f, stats) = fit_rows(&x, h * w, nl * 3, &self.factorization, &NoProgress)?;
+            f.round_to_half();
+            self.report.fit_seconds += t.elapsed().as_secs_f64();
+            self.report.iterations = self.report.iterations.max(stats.iterations);
+            errors.push(stats.final_error());
+            self.model.parts.push(f);
+            if self.options.evaluate {
+                let t = Instant::now();
+                let inputs = data::gather_view(&x, nl * 3, 0, nl, h, w);
+                scores.view(&self.model, v, &inputs)?;
+                self.report.evaluation_seconds += t.elapsed().as_secs_f64();
+            }
+            progress.advance(1);
+        }
+        progress.finish();
+        // Per-view errors summed: the error of a whole texel vector across views.
+        self.report.error_history = vec![errors.iter().sum()];
+        if self.options.evaluate {
+            scores.finish(&mut self.report, nv, nl);
+        }
+        Ok((self.model, self.report))
+    }
+}
+
+/// The images a model rebuilds, as a [`Btf`] source ([`LpcaModel::into_btf`]).
+struct Reconstruction(Arc<LpcaModel>);
+
+impl ImageSource for Reconstruction {
     fn load(&self, view: usize, light: usize) -> std::result::Result<Array3<f32>, BtfError> {
         self.0
             .reconstruct(view, light)
@@ -627,5 +706,46 @@ impl Scores {
             .map(|v| self.per_image[v * nl..(v + 1) * nl].iter().sum::<f64>() / nl as f64)
             .collect();
         report.per_image_delta_e = self.per_image;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn set(n: usize) -> DirectionSet {
+        DirectionSet::new(
+            (0..n)
+                .map(|i| Direction::new(10.0 * i as f64, 0.0))
+                .collect(),
+        )
+        .unwrap()
+    }
+
+    /// A zero factorization of `rows` vectors of `dim` values, `k` clusters of `c` components.
+    fn part(rows: usize, dim: usize, k: usize, c: usize) -> Factorization {
+        let assignment = (0..rows).map(|i| (i % k) as u16).collect();
+        let (means, bases) = (vec![0.0; k * dim], vec![0.0; k * c * dim]);
+        Factorization::new(dim, c, means, bases, assignment, vec![0.0; rows * c]).unwrap()
+    }
+
+    #[test]
+    fn from_parts_refuses_parts_that_do_not_fit_together() {
+        // 3 x 2 texels, 2 views, 4 lights: LPCA is 6 rows of 24 values, PCA BTF 8 rows of 18,
+        // PCA RF 2 factorizations of 6 rows of 12.
+        let make = |method, parts| LpcaModel::from_parts(method, set(2), set(4), (3, 2), parts);
+        let lpca = make(Method::Lpca, vec![part(6, 24, 3, 2)]).unwrap();
+        assert_eq!((lpca.clusters(), lpca.components()), (3, 2));
+        make(Method::PcaBtf, vec![part(8, 18, 1, 2)]).unwrap();
+        make(Method::PcaRf, vec![part(6, 12, 1, 2), part(6, 12, 1, 2)]).unwrap();
+        let err = |method, parts| make(method, parts).unwrap_err();
+        assert!(err(Method::PcaRf, vec![part(6, 12, 1, 2)]).contains("expected 2"));
+        assert!(err(Method::Lpca, vec![]).contains("expected 1"));
+        // A PCA BTF factorization read as LPCA, and texel vectors one view short.
+        assert!(err(Method::Lpca, vec![part(8, 18, 1, 2)]).contains("8 vectors of 18"));
+        assert!(err(Method::Lpca, vec![part(6, 12, 2, 2)]).contains("has 6 of 24"));
+        let mixed = vec![part(6, 12, 1, 2), part(6, 12, 1, 3)];
+        assert!(err(Method::PcaRf, mixed).contains("3 components where part 0 has 2"));
+        assert!(err(Method::PcaBtf, vec![part(8, 18, 2, 2)]).contains("one expected"));
     }
 }

@@ -7,9 +7,11 @@ use super::material::{
     BandMarginals, BandModel, LevelModel, MaterialModel, ModelKind, RangeMap, SubspaceModel,
 };
 use super::{ModelError, Result};
-use crate::btf::{Direction, DirectionSet, io};
+use crate::btf::{BtfError, DirectionSet};
 use crate::decompose::marginals::{BAND_QUANTILES, QUANTILES, QuantileGrid};
 use crate::decompose::{ColourSpace, KlBasis};
+use crate::io::bytes::{Parse, Reader};
+use crate::io::envelope;
 use crate::mrf::neighbourhood::{MAX_ORDER, causal};
 use crate::mrf::{Car2dModel, Car3dModel, GmrfModel, car3d::MAX_ORDER_3D};
 
@@ -40,67 +42,6 @@ impl Writer {
     }
     fn f32s(&mut self, v: &[f64]) {
         v.iter().for_each(|&x| self.f32(x));
-    }
-}
-
-/// Reads from a byte slice; every read checks the remaining length first.
-struct Reader<'a> {
-    bytes: &'a [u8],
-    pos: usize,
-}
-
-type Parse<T> = std::result::Result<T, String>;
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Parse<&'a [u8]> {
-        if self.bytes.len() - self.pos < n {
-            return Err(format!("truncated at byte {} (wanted {n} more)", self.pos));
-        }
-        let s = &self.bytes[self.pos..self.pos + n];
-        self.pos += n;
-        Ok(s)
-    }
-    fn u8(&mut self) -> Parse<u8> {
-        Ok(self.take(1)?[0])
-    }
-    fn u16(&mut self) -> Parse<u16> {
-        Ok(u16::from_le_bytes(
-            self.take(2)?.try_into().expect("2 bytes"),
-        ))
-    }
-    fn u32(&mut self) -> Parse<u32> {
-        Ok(u32::from_le_bytes(
-            self.take(4)?.try_into().expect("4 bytes"),
-        ))
-    }
-    fn f32(&mut self) -> Parse<f64> {
-        let v = f32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes"));
-        if v.is_finite() {
-            Ok(f64::from(v))
-        } else {
-            Err(format!("non-finite number at byte {}", self.pos - 4))
-        }
-    }
-    /// `n` floats, after checking they fit in what is left (no allocation from a bad count).
-    fn f32s(&mut self, n: usize) -> Parse<Vec<f64>> {
-        self.ensure(n, 4)?;
-        (0..n).map(|_| self.f32()).collect()
-    }
-    fn ensure(&self, count: usize, size: usize) -> Parse<()> {
-        match count.checked_mul(size) {
-            Some(b) if b <= self.bytes.len() - self.pos => Ok(()),
-            _ => Err(format!(
-                "count {count} at byte {} exceeds the file",
-                self.pos
-            )),
-        }
-    }
-    fn order(&mut self, max: usize) -> Parse<u8> {
-        let o = self.u8()?;
-        if usize::from(o) > max {
-            return Err(format!("neighbourhood order {o} exceeds {max}"));
-        }
-        Ok(o)
     }
 }
 
@@ -196,15 +137,7 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
         }
     }
     write_colour(&mut w, model);
-    let payload = w.0;
-    let mut out = Vec::with_capacity(payload.len() + 16);
-    out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&VERSION.to_le_bytes());
-    out.extend_from_slice(&0u16.to_le_bytes());
-    out.extend_from_slice(&(payload.len() as u32).to_le_bytes());
-    out.extend_from_slice(&payload);
-    out.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
-    out
+    envelope::seal(MAGIC, VERSION, &w.0)
 }
 
 /// The version 2 tail: the colour space, then the band quantile tables if any.
@@ -291,11 +224,8 @@ pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<MaterialModel> {
 
 fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     let (version, payload) =
-        crate::btf::io::envelope::open_versions(bytes, MAGIC, ".btfm", 1..=VERSION, MAX_PAYLOAD)?;
-    let mut r = Reader {
-        bytes: payload,
-        pos: 0,
-    };
+        envelope::open_versions(bytes, MAGIC, ".btfm", 1..=VERSION, MAX_PAYLOAD)?;
+    let mut r = Reader::new(payload);
     let kind = match r.u8()? {
         0 => ModelKind::Gmrf,
         1 => ModelKind::Car2d,
@@ -305,8 +235,8 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     let (width, height) = (r.u32()?, r.u32()?);
     if width == 0
         || height == 0
-        || width > crate::btf::io::image::MAX_SIDE
-        || height > crate::btf::io::image::MAX_SIDE
+        || width > crate::btf::io::picture::MAX_SIDE
+        || height > crate::btf::io::picture::MAX_SIDE
     {
         return Err(format!("image size {width}x{height} out of range"));
     }
@@ -316,17 +246,8 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             "{levels} pyramid levels (1..={MAX_LEVELS} accepted)"
         ));
     }
-    let mut sets = Vec::new();
-    for _ in 0..2 {
-        let n = usize::from(r.u16()?);
-        r.ensure(n, 8)?;
-        let dirs = (0..n)
-            .map(|_| Ok(Direction::new(r.f32()?, r.f32()?)))
-            .collect::<Parse<Vec<_>>>()?;
-        sets.push(DirectionSet::new(dirs).map_err(|e| e.to_string())?);
-    }
-    let lights = sets.pop().expect("two sets");
-    let views = sets.pop().expect("two sets");
+    let views = DirectionSet::read_le(&mut r, "view directions")?;
+    let lights = DirectionSet::read_le(&mut r, "light directions")?;
     let clusters = usize::from(r.u16()?);
     if clusters == 0 {
         return Err("no subspace models".into());
@@ -336,7 +257,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         return Err(format!("cluster table entry size {entry}"));
     }
     let pairs = views.len() * lights.len();
-    r.ensure(pairs, entry)?;
+    r.ensure(pairs, entry, "cluster table")?;
     let cluster_table = (0..pairs)
         .map(|_| {
             let c = if entry == 1 {
@@ -351,7 +272,11 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         })
         .collect::<Parse<Vec<u16>>>()?;
     // Every subspace needs at least its header: bound the count by the bytes left.
-    r.ensure(clusters, 4 + 48 + 12 * QUANTILES + usize::from(levels))?;
+    r.ensure(
+        clusters,
+        4 + 48 + 12 * QUANTILES + usize::from(levels),
+        "subspace models",
+    )?;
     let mut subspaces = Vec::with_capacity(clusters);
     for _ in 0..clusters {
         let representative = (r.u16()?, r.u16()?);
@@ -382,7 +307,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         for _ in 0..levels {
             level_models.push(match kind {
                 ModelKind::Car3d => {
-                    let order = r.order(MAX_ORDER_3D)?;
+                    let order = r.u8_at_most(MAX_ORDER_3D, "neighbourhood order")?;
                     let mean: [f64; 3] = r.f32s(3)?.try_into().expect("3");
                     let sigma: [f64; 9] = r.f32s(9)?.try_into().expect("9");
                     let a = r.f32s(9 * causal(usize::from(order)).len())?;
@@ -395,7 +320,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
                 }
                 _ => {
                     let band = |r: &mut Reader| -> Parse<BandModel> {
-                        let order = r.order(MAX_ORDER)?;
+                        let order = r.u8_at_most(MAX_ORDER, "neighbourhood order")?;
                         let (mean, sigma2) = (r.f32()?, r.f32()?);
                         if sigma2 < 0.0 {
                             return Err(format!("negative noise variance {sigma2}"));
@@ -439,7 +364,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
                 return Err("empty range map".into());
             }
             let (lo, quantum) = (r.f32()?, r.f32()?);
-            r.ensure(rows * cols, 2)?;
+            r.ensure(rows * cols, 2, "range map")?;
             let heights = (0..rows * cols)
                 .map(|_| Ok((lo + quantum * f64::from(r.u16()?)) as f32))
                 .collect::<Parse<Vec<f32>>>()?;
@@ -469,12 +394,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     if version >= 2 {
         read_colour(&mut r, &mut subspaces, usize::from(levels))?;
     }
-    if r.pos != payload.len() {
-        return Err(format!(
-            "{} unexplained bytes at the end of the payload",
-            payload.len() - r.pos
-        ));
-    }
+    r.finish()?;
     Ok(MaterialModel {
         kind,
         views,
@@ -506,7 +426,11 @@ fn read_colour(r: &mut Reader, subspaces: &mut [SubspaceModel], levels: usize) -
         ));
     }
     if count > 0 {
-        r.ensure(subspaces.len() * levels * 3, 8 + 2 * count)?;
+        r.ensure(
+            subspaces.len() * levels * 3,
+            8 + 2 * count,
+            "band quantiles",
+        )?;
     }
     for s in subspaces.iter_mut() {
         s.kl.space = space;
@@ -541,7 +465,8 @@ fn read_colour(r: &mut Reader, subspaces: &mut [SubspaceModel], levels: usize) -
 /// # Errors
 /// The destination cannot be written.
 pub fn write(model: &MaterialModel, path: &Path) -> Result<()> {
-    Ok(io::write_file_atomic(path, &to_bytes(model))?)
+    crate::io::write_file_atomic(path, &to_bytes(model)).map_err(BtfError::from)?;
+    Ok(())
 }
 
 /// Reads a model file (at most [`MAX_PAYLOAD`] + 16 bytes are read).
@@ -549,12 +474,7 @@ pub fn write(model: &MaterialModel, path: &Path) -> Result<()> {
 /// # Errors
 /// The file cannot be read, or is not a valid model.
 pub fn read(path: &Path) -> Result<MaterialModel> {
-    use std::io::Read;
-    let io_error = |e| ModelError::Btf(crate::btf::BtfError::io(path, e));
-    let file = std::fs::File::open(path).map_err(io_error)?;
-    let mut bytes = Vec::new();
-    file.take(u64::from(MAX_PAYLOAD) + 17)
-        .read_to_end(&mut bytes)
-        .map_err(io_error)?;
+    let limit = u64::from(MAX_PAYLOAD) + envelope::OVERHEAD as u64;
+    let bytes = crate::io::read_capped(path, limit).map_err(BtfError::from)?;
     from_bytes(&bytes, path)
 }

@@ -4,11 +4,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use btfmrf::btf::io::{self, publish_dir, temp_dir_beside};
+use btfmrf::btf::io;
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction, DirectionSet, ImageFormat};
 use btfmrf::eval::bench::{self, Baseline, BenchOptions};
 use btfmrf::eval::montage::montage;
+use btfmrf::io::{publish_dir, temp_dir_beside, write_file_atomic};
 use btfmrf::lpca::{LpcaModel, Method};
 use btfmrf::memory;
 use btfmrf::model::{MaterialModel, ModelKind, format};
@@ -127,7 +128,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     std::fs::create_dir(dir.join("models")).context("creating models/")?;
     for model in &run.baseline_models {
         let name = format!("{}.lpca", model.method().name());
-        io::write_file_atomic(&dir.join("models").join(name), &model.to_bytes())?;
+        write_file_atomic(&dir.join("models").join(name), &model.to_bytes())?;
     }
     for model in &run.mrf_models {
         format::write(
@@ -159,7 +160,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         start,
     );
     md.push_str(&renders);
-    io::write_file_atomic(&dir.join("report.md"), md.as_bytes())?;
+    write_file_atomic(&dir.join("report.md"), md.as_bytes())?;
     publish_dir(tmp, &args.out)?;
     emit(format!(
         "demo: wrote {} in {:.0} s (report.md, measured.png, comparison.png, {enlarged_file}, bench/, models/)",

@@ -289,7 +289,7 @@ fn main() -> ExitCode {
 fn on_interrupt_remove_temporaries() {
     // Without a handler the default action (exit, leaving temporaries) still applies.
     let _ = ctrlc::set_handler(|| {
-        let removed = btfmrf::btf::io::partial::remove_registered();
+        let removed = btfmrf::io::partial::remove_registered();
         eprintln!("error: interrupted; removed {removed} partial output(s)");
         std::process::exit(130);
     });

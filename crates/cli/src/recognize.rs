@@ -4,12 +4,12 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use btfmrf::btf::io::write_file_atomic;
 use btfmrf::features::FeatureOptions;
 use btfmrf::features::recognition::{
-    Dataset, Method, Outcome, evaluate, rti_dataset, synthetic_dataset, texture_dataset,
+    Dataset, Descriptor, Outcome, evaluate, rti_dataset, synthetic_dataset, texture_dataset,
     with_relit_tests,
 };
+use btfmrf::io::write_file_atomic;
 use btfmrf::progress::Progress;
 
 use super::{Bar, Global, emit};
@@ -111,7 +111,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     bar.start("recognize", datasets.len() as u64);
     let mut results: Vec<Vec<Outcome>> = Vec::new();
     for d in &datasets {
-        results.push(evaluate(d, &Method::ALL, &options)?);
+        results.push(evaluate(d, &Descriptor::ALL, &options)?);
         bar.advance(1);
     }
     bar.finish();
@@ -162,11 +162,11 @@ fn report(
 ) -> String {
     let mut s = String::new();
     let _ = write!(s, "| dataset | classes | train | test |");
-    for m in Method::ALL {
+    for m in Descriptor::ALL {
         let _ = write!(s, " {} |", m.name());
     }
     s.push_str("\n|---|---|---|---|");
-    for _ in Method::ALL {
+    for _ in Descriptor::ALL {
         s.push_str("---|");
     }
     s.push('\n');

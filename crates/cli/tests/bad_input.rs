@@ -176,7 +176,7 @@ fn image_name_outside_the_pattern() {
 #[test]
 fn mixed_image_sizes() {
     let dir = temp();
-    let bigger = io::image::encode(&Array3::zeros((3, 16, 16)), ImageFormat::Png, "x").unwrap();
+    let bigger = io::picture::encode(&Array3::zeros((3, 16, 16)), ImageFormat::Png, "x").unwrap();
     let bad = damaged_zip(dir.path(), |m| m[3000].1 = bigger);
     let err = fails(&["info", s(&bad)]);
     assert!(
@@ -212,7 +212,7 @@ fn nan_and_inf_in_an_exr() {
     poisoned[[1, 2, 3]] = f32::NAN;
     poisoned[[0, 7, 7]] = f32::INFINITY;
     let victim = entries(&exr_dir)[1234].clone();
-    let bytes = io::image::encode(&poisoned, ImageFormat::Exr, "x").unwrap();
+    let bytes = io::picture::encode(&poisoned, ImageFormat::Exr, "x").unwrap();
     std::fs::write(exr_dir.join(&victim), bytes).unwrap();
     let out = dir.path().join("out.zip");
     let err = fails(&["convert", s(&exr_dir), "--out", s(&out)]);
@@ -227,7 +227,8 @@ fn nan_and_inf_in_an_exr() {
 #[test]
 fn rti_lp_naming_a_missing_image() {
     let dir = temp();
-    let png = io::image::encode(&Array3::from_elem((3, 4, 4), 0.2), ImageFormat::Png, "x").unwrap();
+    let png =
+        io::picture::encode(&Array3::from_elem((3, 4, 4), 0.2), ImageFormat::Png, "x").unwrap();
     std::fs::write(dir.path().join("a.png"), &png).unwrap();
     std::fs::write(
         dir.path().join("dirs.lp"),
@@ -297,7 +298,7 @@ fn write_deflated_zip(path: &Path, members: &[(String, Vec<u8>)]) {
 }
 
 fn png(side: usize) -> Vec<u8> {
-    io::image::encode(
+    io::picture::encode(
         &Array3::from_elem((3, side, side), 0.2),
         ImageFormat::Png,
         "x",
@@ -415,7 +416,7 @@ fn many_members_with_distinct_directions_fail_fast() {
 
 /// A baseline JPEG of `side`^2 whose frame header is then rewritten to claim `claim`^2.
 fn jpeg_claiming(side: usize, claim: u16) -> Vec<u8> {
-    let mut jpeg = io::image::encode(
+    let mut jpeg = io::picture::encode(
         &Array3::from_elem((3, side, side), 0.4),
         ImageFormat::Jpeg { quality: 90 },
         "x",
@@ -437,14 +438,14 @@ fn small_jpeg_claiming_a_large_image_is_refused() {
     for claim in [2048, 16384] {
         let jpeg = jpeg_claiming(16, claim);
         assert!(jpeg.ends_with(&[0xff, 0xd9]));
-        let err = io::image::decode(&jpeg, "x.jpg").unwrap_err().to_string();
+        let err = io::picture::decode(&jpeg, "x.jpg").unwrap_err().to_string();
         assert!(
             err.contains("truncated JPEG") && err.contains("cannot hold"),
             "{err}"
         );
     }
     // The same file with its true size decodes.
-    assert!(io::image::decode(&jpeg_claiming(16, 16), "x.jpg").is_ok());
+    assert!(io::picture::decode(&jpeg_claiming(16, 16), "x.jpg").is_ok());
 }
 
 /// Defect 5: a 4x4 PNG followed by 64 MiB of zeros (compressed to a few kilobytes) was read

@@ -89,7 +89,7 @@ fn many_members_zip(path: &Path, n: usize) {
 
 /// A 16^2 JPEG whose header claims `claim`^2 pixels.
 fn jpeg_claiming(claim: u16) -> Vec<u8> {
-    let mut jpeg = io::image::encode(
+    let mut jpeg = io::picture::encode(
         &Array3::from_elem((3, 16, 16), 0.4),
         ImageFormat::Jpeg { quality: 90 },
         "x",
@@ -127,7 +127,8 @@ fn hollow_lpca(side: u32) -> Vec<u8> {
 /// A zip of four 4x4 PNGs under one view, member 2 padded with `pad` zero bytes (deflated).
 fn padded_zip(path: &Path, pad: usize) {
     use std::io::Write;
-    let png = io::image::encode(&Array3::from_elem((3, 4, 4), 0.2), ImageFormat::Png, "x").unwrap();
+    let png =
+        io::picture::encode(&Array3::from_elem((3, 4, 4), 0.2), ImageFormat::Png, "x").unwrap();
     let mut zip = zip::ZipWriter::new(std::fs::File::create(path).unwrap());
     let options = zip::write::SimpleFileOptions::default()
         .compression_method(zip::CompressionMethod::Deflated)
@@ -167,7 +168,7 @@ fn readers_allocate_within_their_bounds() {
     );
 
     let jpeg = jpeg_claiming(16384);
-    let (r, peak) = peak_of(|| io::image::decode(&jpeg, "x.jpg"));
+    let (r, peak) = peak_of(|| io::picture::decode(&jpeg, "x.jpg"));
     assert!(
         r.is_err() && peak < mb,
         "JPEG claiming 16384^2: {peak} bytes"
@@ -658,8 +659,9 @@ fn targets(scratch: &Path) -> Vec<(&'static str, Target, Vec<Vec<u8>>)> {
         v
     };
     let model = std::fs::read(root.join("tests/golden/sponge64.btfm")).unwrap();
-    let png = io::image::encode(&Array3::from_elem((3, 4, 4), 0.3), ImageFormat::Png, "x").unwrap();
-    let jpeg = io::image::encode(
+    let png =
+        io::picture::encode(&Array3::from_elem((3, 4, 4), 0.3), ImageFormat::Png, "x").unwrap();
+    let jpeg = io::picture::encode(
         &Array3::from_elem((3, 8, 8), 0.3),
         ImageFormat::Jpeg { quality: 80 },
         "x",
@@ -670,7 +672,7 @@ fn targets(scratch: &Path) -> Vec<(&'static str, Target, Vec<Vec<u8>>)> {
     std::fs::write(set.join("a.png"), &png).unwrap();
     std::fs::write(set.join("b.png"), &png).unwrap();
     let secret =
-        io::image::encode(&Array3::from_elem((3, 5, 3), 0.3), ImageFormat::Png, "x").unwrap();
+        io::picture::encode(&Array3::from_elem((3, 5, 3), 0.3), ImageFormat::Png, "x").unwrap();
     std::fs::write(scratch.join("secret.png"), secret).unwrap();
     let zip_path = scratch.join("fuzz.zip");
     let p = |s: &str| Path::new(s).to_path_buf();
@@ -719,8 +721,8 @@ fn targets(scratch: &Path) -> Vec<(&'static str, Target, Vec<Vec<u8>>)> {
         (
             "image_decode",
             Box::new(|d: &[u8]| {
-                let _ = io::image::probe_size(d, "f");
-                let _ = io::image::decode(d, "f");
+                let _ = io::picture::probe_size(d, "f");
+                let _ = io::picture::decode(d, "f");
             }),
             vec![png.clone(), jpeg],
         ),

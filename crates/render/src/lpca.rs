@@ -83,8 +83,8 @@ impl LpcaTables {
         let mut texel_weights = Vec::new();
         let mut group0 = 0;
         for f in model.parts() {
-            let d = f.dim;
-            if d != pairs * 3 || f.components != c || f.items() != n {
+            let d = f.dim();
+            if d != pairs * 3 || f.components() != c || f.items() != n {
                 return Err(RenderError::Unsupported(format!(
                     "inconsistent {} model: vectors of {d} values for {pairs} pairs",
                     model.method().name()
@@ -93,28 +93,20 @@ impl LpcaTables {
             let groups = f.clusters();
             eigen.resize((group0 + groups) * pairs * (c + 1), [0.0; 4]);
             for k in 0..groups {
-                // Row r of cluster k: its mean (r = 0) or its eigen-ABRDF r - 1, each a
-                // vector of `d` values, RGB per pair.
-                let vector = |r: usize| match r {
-                    0 => &f.means[k * d..(k + 1) * d],
-                    _ => &f.bases[(k * c + r - 1) * d..(k * c + r) * d],
-                };
-                for r in 0..=c {
-                    let v = vector(r);
-                    for p in 0..pairs {
-                        eigen[eigen_slot(group0 + k, p, r, pairs, c)] =
-                            [v[3 * p], v[3 * p + 1], v[3 * p + 2], 0.0];
+                for p in 0..pairs {
+                    for (r, [x, y, z]) in f.rgb_terms(k, 3 * p).enumerate() {
+                        eigen[eigen_slot(group0 + k, p, r, pairs, c)] = [x, y, z, 0.0];
                     }
                 }
             }
             group0 += groups;
-            texel_weights.extend_from_slice(&f.weights);
+            texel_weights.extend_from_slice(f.weights());
         }
         let texel_cluster = if per_view {
             vec![0; n]
         } else {
             model.parts()[0]
-                .assignment
+                .assignment()
                 .iter()
                 .map(|&k| u32::from(k))
                 .collect()

@@ -1,11 +1,10 @@
 //! Reading and writing BTFs on disk: the Bonn UBO2003/ATRIUM layout (zip or folder of
-//! JPEG/PNG/EXR images), RTI folders with a `.lp` light file, single images, and atomic writes
-//! (temporary name, then rename) so that no half-written output is ever left as if complete.
+//! JPEG/PNG/EXR images), RTI folders with a `.lp` light file and single images. Every output is
+//! written atomically through [`crate::io`] (temporary name, then rename), so that no
+//! half-written output is ever left as if complete.
 
-pub(crate) mod envelope;
-pub mod image;
-pub mod partial;
 mod photo;
+pub mod picture;
 pub mod rti;
 pub mod ubo2003;
 
@@ -20,8 +19,8 @@ use zip::ZipArchive;
 use super::dataset::Btf;
 use super::error::{BtfError, Result};
 
-pub use self::image::ImageFormat;
-use self::partial::{PartialDir, PartialFile};
+pub use self::picture::ImageFormat;
+use crate::io::{parent_dir, write_file_atomic};
 pub use ubo2003::write_ubo2003;
 
 /// The largest file this library reads into memory at once (an image or a `.lp` file).
@@ -237,25 +236,25 @@ impl Container {
     fn probe_with_head(&self, name: &str) -> Result<((u32, u32), Vec<u8>)> {
         let file = self.describe(name);
         let head = self.read(name, Some(PROBE_PREFIX))?;
-        match image::probe_size(&head, &file) {
+        match picture::probe_size(&head, &file) {
             Err(BtfError::Image { .. }) if head.len() as u64 == PROBE_PREFIX => {
-                Ok((image::probe_size(&self.read(name, None)?, &file)?, head))
+                Ok((picture::probe_size(&self.read(name, None)?, &file)?, head))
             }
             other => Ok((other?, head)),
         }
     }
 
     /// Decodes an image member into planar `(3, h, w)` linear RGB. The member is read only up
-    /// to what an image of its declared size can need ([`image::max_file_bytes`]): a small
+    /// to what an image of its declared size can need ([`picture::max_file_bytes`]): a small
     /// image followed by a gigabyte of padding is refused, not loaded.
     pub(crate) fn load_image(&self, name: &str) -> Result<Array3<f32>> {
         let ((w, h), head) = self.probe_with_head(name)?;
         let bytes = if (head.len() as u64) < PROBE_PREFIX {
             head // the whole file already
         } else {
-            self.read_at_most(name, image::max_file_bytes(w, h), true)?
+            self.read_at_most(name, picture::max_file_bytes(w, h), true)?
         };
-        image::decode(&bytes, &self.describe(name))
+        picture::decode(&bytes, &self.describe(name))
     }
 }
 
@@ -297,56 +296,6 @@ pub(crate) fn member_path(root: &Path, name: &str, confined: bool) -> Result<Pat
     Ok(real)
 }
 
-/// Writes `bytes` to `path` atomically: a temporary file in the same folder, then a rename.
-///
-/// # Errors
-/// The folder is not writable, or the disk is full.
-pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    use std::io::Write;
-    let mut tmp = temp_file_beside(path)?;
-    tmp.write_all(bytes)
-        .and_then(|_| tmp.flush())
-        .map_err(|e| BtfError::io(path, e))?;
-    tmp.persist(path).map_err(|e| BtfError::io(path, e))?;
-    Ok(())
-}
-
-/// A temporary file next to `path` (same folder, so that the final rename is atomic); it is
-/// deleted if dropped before being persisted, or on an interrupt ([`partial`]).
-pub(crate) fn temp_file_beside(path: &Path) -> Result<PartialFile> {
-    let parent = parent_dir(path);
-    PartialFile::new_in(parent).map_err(|e| BtfError::io(parent, e))
-}
-
-/// A temporary folder next to `path`, deleted if dropped or on an interrupt ([`partial`]);
-/// [`publish_dir`] gives it its name.
-pub fn temp_dir_beside(path: &Path) -> Result<PartialDir> {
-    if path.exists() {
-        return Err(BtfError::io(
-            path,
-            std::io::Error::new(
-                std::io::ErrorKind::AlreadyExists,
-                "already exists; remove it or choose another name",
-            ),
-        ));
-    }
-    let parent = parent_dir(path);
-    PartialDir::new_in(parent).map_err(|e| BtfError::io(parent, e))
-}
-
-/// Renames a completed temporary folder to `path` (removing it if that fails).
-pub fn publish_dir(tmp: PartialDir, path: &Path) -> Result<()> {
-    tmp.publish(path).map_err(|e| BtfError::io(path, e))
-}
-
-/// The folder holding `path` ("." for a bare file name).
-pub(crate) fn parent_dir(path: &Path) -> &Path {
-    match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    }
-}
-
 /// Writes one image file (format from the extension: `.png`, `.jpg`, `.exr`), atomically.
 ///
 /// # Errors
@@ -359,8 +308,8 @@ pub fn write_image(path: &Path, image: &Array3<f32>) -> Result<()> {
             format!("{name}: use a .png, .jpg or .exr file name"),
         )
     })?;
-    let bytes = image::encode(image, format, &name)?;
-    write_file_atomic(path, &bytes)
+    let bytes = picture::encode(image, format, &name)?;
+    Ok(write_file_atomic(path, &bytes)?)
 }
 
 /// Reads one image file (PNG, JPEG or EXR) into planar `(3, h, w)` linear RGB.

@@ -40,7 +40,7 @@ pub(crate) fn open_file(path: &Path) -> Result<Btf> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    one_image(Container::user_dir(super::parent_dir(path)), name, path)
+    one_image(Container::user_dir(crate::io::parent_dir(path)), name, path)
 }
 
 /// Opens a folder without a light file as a photograph when none of its images carries a

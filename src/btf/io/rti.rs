@@ -159,7 +159,7 @@ impl ImageSource for RtiSource {
 
 /// Opens an RTI capture from its `.lp` file: one view (the zenith), one light per listed image.
 pub(crate) fn open(lp_path: &Path) -> Result<Btf> {
-    let bytes = Container::user_dir(super::parent_dir(lp_path)).read(
+    let bytes = Container::user_dir(crate::io::parent_dir(lp_path)).read(
         &lp_path
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
@@ -168,7 +168,7 @@ pub(crate) fn open(lp_path: &Path) -> Result<Btf> {
     )?;
     let text = String::from_utf8_lossy(&bytes);
     let lp = parse_lp(&text, lp_path)?;
-    let root = super::parent_dir(lp_path);
+    let root = crate::io::parent_dir(lp_path);
     let container = Container::dir(root);
     for name in &lp.images {
         let p = root.join(name);

@@ -10,7 +10,7 @@ use ndarray::Array3;
 use rayon::prelude::*;
 
 use super::Container;
-use super::image::{self, ImageFormat};
+use super::picture::{self, ImageFormat};
 use crate::btf::dataset::{Btf, ImageSource};
 use crate::btf::directions::{Direction, DirectionSet};
 use crate::btf::error::{BtfError, Result};
@@ -373,7 +373,7 @@ fn encode_in_order(
             .into_par_iter()
             .map(|i| {
                 let im = btf.image(i / lights, i % lights)?;
-                image::encode(&im, format, &names[i])
+                picture::encode(&im, format, &names[i])
             })
             .collect::<Result<_>>()?;
         for (i, bytes) in (start..end).zip(&encoded) {
@@ -392,7 +392,7 @@ fn write_zip(
     format: ImageFormat,
     progress: &dyn Progress,
 ) -> Result<()> {
-    let tmp = super::temp_file_beside(out)?;
+    let tmp = crate::io::temp_file_beside(out)?;
     let io_err = |e: std::io::Error| BtfError::io(out, e);
     let zip_err = |e: zip::result::ZipError| BtfError::io(out, std::io::Error::other(e));
     let mut zip = zip::ZipWriter::new(std::io::BufWriter::new(tmp));
@@ -420,12 +420,12 @@ fn write_folder(
     format: ImageFormat,
     progress: &dyn Progress,
 ) -> Result<()> {
-    let tmp = super::temp_dir_beside(out)?;
+    let tmp = crate::io::temp_dir_beside(out)?;
     encode_in_order(btf, names, lights, format, progress, |name, bytes| {
         let path = tmp.path().join(name);
         std::fs::write(&path, bytes).map_err(|e| BtfError::io(&path, e))
     })?;
-    super::publish_dir(tmp, out)
+    Ok(crate::io::publish_dir(tmp, out)?)
 }
 
 #[cfg(test)]

@@ -22,7 +22,7 @@ use ndarray::{Array2, Array3};
 use super::dataset::{Btf, ImageSource};
 use super::directions::DirectionSet;
 use super::error::{BtfError, Result};
-use super::io::{self, image::encode_exr_channels};
+use super::io::picture::encode_exr_channels;
 use materials::{Knit, Leather, Pattern, Sponge, Stones};
 use render::{Surface, ViewSample, shade};
 
@@ -150,13 +150,13 @@ impl GroundTruth {
             ("specular.exr", vec![("Y", flat(self.specular.view()))]),
             ("shininess.exr", vec![("Y", flat(self.shininess.view()))]),
         ];
-        let tmp = io::temp_dir_beside(dir)?;
+        let tmp = crate::io::temp_dir_beside(dir)?;
         for (name, planes) in files {
             let path = tmp.path().join(name);
             let bytes = encode_exr_channels(w, h, planes, &path.display().to_string())?;
             std::fs::write(&path, bytes).map_err(|e| BtfError::io(&path, e))?;
         }
-        io::publish_dir(tmp, dir)
+        Ok(crate::io::publish_dir(tmp, dir)?)
     }
 }
 

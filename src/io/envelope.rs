@@ -1,10 +1,29 @@
 //! The envelope shared by the model files (`.btfm`, `.lpca`): magic, version, flags, payload
-//! length, payload, CRC-32 of the payload. Checked here once, before any payload is parsed.
-//! The flags field must be zero: no flag is defined in version 1.
+//! length, payload, CRC-32 of the payload, all little-endian (docs/FORMAT.md). Written by
+//! [`seal`] and checked by [`open`] once, before any payload is parsed. The flags field must be
+//! zero: no flag is defined in version 1.
+
+/// Bytes the envelope adds around a payload: 12 before it, 4 after.
+pub const OVERHEAD: usize = 16;
+
+/// A whole file: the header (`magic`, `version`, no flags, the payload length), the payload
+/// and its CRC-32. A payload of 4 GiB or more is marked with the length `u32::MAX`, which no
+/// reader's limit admits, rather than a wrapped length.
+pub fn seal(magic: [u8; 4], version: u16, payload: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(payload.len() + OVERHEAD);
+    out.extend_from_slice(&magic);
+    out.extend_from_slice(&version.to_le_bytes());
+    out.extend_from_slice(&0u16.to_le_bytes());
+    let len = u32::try_from(payload.len()).unwrap_or(u32::MAX);
+    out.extend_from_slice(&len.to_le_bytes());
+    out.extend_from_slice(payload);
+    out.extend_from_slice(&crc32fast::hash(payload).to_le_bytes());
+    out
+}
 
 /// The payload of `bytes` after checking the envelope; the error says what is wrong (`ext`
 /// names the file kind in messages, e.g. ".btfm").
-pub(crate) fn open<'a>(
+pub fn open<'a>(
     bytes: &'a [u8],
     magic: [u8; 4],
     ext: &str,
@@ -15,7 +34,7 @@ pub(crate) fn open<'a>(
 }
 
 /// [`open`] for a reader of several format versions: the version found and the payload.
-pub(crate) fn open_versions<'a>(
+pub fn open_versions<'a>(
     bytes: &'a [u8],
     magic: [u8; 4],
     ext: &str,
@@ -69,4 +88,43 @@ pub(crate) fn open_versions<'a>(
         ));
     }
     Ok((found, payload))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sealed_payloads_open_and_damage_is_named() {
+        let file = seal(*b"TEST", 3, b"payload");
+        assert_eq!(file.len(), 7 + OVERHEAD);
+        assert_eq!(open(&file, *b"TEST", ".test", 3, 64).unwrap(), b"payload");
+        assert_eq!(
+            open_versions(&file, *b"TEST", ".test", 1..=3, 64).unwrap(),
+            (3, &b"payload"[..])
+        );
+        let err = |bytes: &[u8]| open(bytes, *b"TEST", ".test", 3, 64).unwrap_err();
+        assert!(err(&file[..3]).contains("too short"));
+        assert!(err(b"NOPE\x03\x00").contains("magic"));
+        assert!(
+            open(&file, *b"TEST", ".test", 2, 64)
+                .unwrap_err()
+                .contains("version 2")
+        );
+        assert!(
+            open(&file, *b"TEST", ".test", 3, 6)
+                .unwrap_err()
+                .contains("limit")
+        );
+        let mut flipped = file.clone();
+        flipped[14] ^= 1;
+        assert!(err(&flipped).contains("checksum"));
+        let mut flagged = file.clone();
+        flagged[6] = 1;
+        assert!(err(&flagged).contains("flags"));
+        let mut long = file.clone();
+        long.push(0);
+        assert!(err(&long).contains("unexpected"));
+        assert!(err(&file[..file.len() - 1]).contains("truncated"));
+    }
 }

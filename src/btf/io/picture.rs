@@ -8,6 +8,7 @@ use exr::prelude::{self as exrp, ReadChannels, ReadLayers, WritableImage};
 use image::{ImageReader, Limits};
 use ndarray::Array3;
 
+use crate::btf::dataset::check_finite;
 use crate::btf::error::{BtfError, Result};
 use crate::color::{Srgb8Encoder, srgb_to_linear, srgb8_to_linear_table};
 
@@ -300,32 +301,6 @@ fn decode_exr(bytes: &[u8], file: &str) -> Result<Array3<f32>> {
     }
     check_finite(&out, file)?;
     Ok(out)
-}
-
-/// Fails with [`BtfError::NonFinite`] if any sample of a `(c, h, w)` image is NaN or infinite.
-pub fn check_finite(image: &Array3<f32>, file: &str) -> Result<()> {
-    let (channels, h, w) = image.dim();
-    let mut count = 0usize;
-    let mut first = None;
-    for y in 0..h {
-        for x in 0..w {
-            for c in 0..channels {
-                if !image[[c, y, x]].is_finite() {
-                    count += 1;
-                    first.get_or_insert((x, y));
-                }
-            }
-        }
-    }
-    match first {
-        None => Ok(()),
-        Some((x, y)) => Err(BtfError::NonFinite {
-            file: file.to_string(),
-            count,
-            x,
-            y,
-        }),
-    }
 }
 
 /// Encodes planar `(3, h, w)` linear RGB into file bytes of the given format (8-bit formats are
