@@ -61,15 +61,7 @@ pub fn to_bytes(model: &LpcaModel) -> Vec<u8> {
     p.extend_from_slice(&(model.height() as u32).to_le_bytes());
     p.extend_from_slice(&(model.components() as u16).to_le_bytes());
     for set in [model.views(), model.lights()] {
-        p.extend_from_slice(&(set.len() as u16).to_le_bytes());
-        for d in set.iter() {
-            p.extend_from_slice(&(d.theta_deg as f32).to_le_bytes());
-            // An azimuth just below 360 rounds up to 360.0 in single precision, which reads
-            // back as 0: write that 0 (fuzzing found the write-read-write difference).
-            let phi = d.phi_deg as f32;
-            let phi = if phi >= 360.0 { 0.0 } else { phi };
-            p.extend_from_slice(&phi.to_le_bytes());
-        }
+        set.write_le(&mut p);
     }
     let halves = |p: &mut Vec<u8>, v: &[f32]| {
         for &x in v {
