@@ -130,7 +130,7 @@ impl Tally {
                 .worst
                 .entry(f.detector)
                 .or_insert((f64::NEG_INFINITY, String::new()));
-            if !(ratio <= worst.0) {
+            if ratio.is_nan() || ratio > worst.0 {
                 *worst = (ratio, c.label.clone());
             }
             if f.flagged() {
