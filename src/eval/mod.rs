@@ -1,6 +1,7 @@
 //! Evaluation: measures of how well a model reproduces a material, the speed-against-error
 //! benchmark of every method, and its plots.
 
+pub mod artefacts;
 pub mod bench;
 mod error;
 pub mod judge;
