@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use btfmrf::btf::Direction;
-use btfmrf::model::format;
+use btfmrf::source::AnyModel;
 use btfmrf_render::viewer::{ViewerOptions, run_viewer};
 use btfmrf_render::{Mapping, MeshKind};
 
@@ -63,7 +63,13 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
     if !n.is_power_of_two() || !(32..=4096).contains(&n) {
         anyhow::bail!("invalid --texture-size {n}: a power of two within 32..=4096");
     }
-    let model = format::read(&args.model)?;
+    let model = match AnyModel::open(&args.model)? {
+        AnyModel::Mrf(model) => *model,
+        AnyModel::Lpca(_) => anyhow::bail!(
+            "{}: an LPCA model; the viewer shows .btfm models (render this one with btfmrf render)",
+            args.model.display()
+        ),
+    };
     let mut meshes = vec![args.mesh.clone()];
     for kind in [
         MeshKind::Sphere,
