@@ -46,4 +46,5 @@ pub mod memory;
 pub mod model;
 pub mod mrf;
 pub mod progress;
+pub mod source;
 pub mod synthesis;

@@ -47,7 +47,7 @@ pub struct BenchOptions {
 }
 
 /// One pixelwise baseline of the benchmark: a PCA factorization and its size.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct Baseline {
     /// Local PCA, global PCA of images, or per-view PCA.
     pub method: Method,
@@ -87,13 +87,109 @@ impl Default for BenchOptions {
     }
 }
 
+/// Which method a row of the report measured, with the settings that tell two runs of one
+/// method apart (LPCA 8x4 is not LPCA 32x8).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum MethodId {
+    /// An MRF model.
+    Mrf {
+        /// GMRF, 2D CAR or 3D CAR.
+        kind: ModelKind,
+        /// Subspace images of the fitted model.
+        clusters: usize,
+        /// Pyramid levels of the fitted model.
+        levels: usize,
+    },
+    /// A pixelwise PCA baseline.
+    Baseline(Baseline),
+}
+
+/// A method's settings as `report.json` writes them (`parameters`): only those it has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct Parameters {
+    /// Subspace images (MRF) or clusters (local PCA).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clusters: Option<usize>,
+    /// Principal components per cluster (per view for PCA RF).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub components: Option<usize>,
+    /// Pyramid levels (MRF).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub levels: Option<usize>,
+}
+
+impl MethodId {
+    /// `gmrf`, `2dcar`, `3dcar`, `lpca`, `pca-btf` or `pca-rf`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            MethodId::Mrf { kind, .. } => kind.name(),
+            MethodId::Baseline(b) => b.method.name(),
+        }
+    }
+
+    /// Whether the method synthesizes new texture (MRF) rather than reproducing pixels.
+    pub fn is_mrf(&self) -> bool {
+        matches!(self, MethodId::Mrf { .. })
+    }
+
+    /// The settings that matter for this method.
+    pub fn parameters(&self) -> Parameters {
+        match *self {
+            MethodId::Mrf {
+                clusters, levels, ..
+            } => Parameters {
+                clusters: Some(clusters),
+                components: None,
+                levels: Some(levels),
+            },
+            MethodId::Baseline(b) => Parameters {
+                clusters: (b.method == Method::Lpca).then_some(b.clusters),
+                components: Some(b.components),
+                levels: None,
+            },
+        }
+    }
+}
+
+impl Parameters {
+    /// (name, value) of each setting present, in `report.json`'s order.
+    pub fn entries(&self) -> Vec<(&'static str, usize)> {
+        [
+            ("clusters", self.clusters),
+            ("components", self.components),
+            ("levels", self.levels),
+        ]
+        .into_iter()
+        .filter_map(|(k, v)| Some((k, v?)))
+        .collect()
+    }
+}
+
+impl std::fmt::Display for MethodId {
+    /// `lpca clusters=8 components=4`: the name and settings, as the report's text names a
+    /// row.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} {}", self.name(), compact(&self.parameters()))
+    }
+}
+
+impl serde::Serialize for MethodId {
+    /// As `report.json`'s `name` and `parameters` fields.
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = s.serialize_map(Some(2))?;
+        map.serialize_entry("name", self.name())?;
+        map.serialize_entry("parameters", &self.parameters())?;
+        map.end()
+    }
+}
+
 /// One method's row of the report (the fields of `report.json`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct MethodResult {
-    /// `gmrf`, `2dcar`, `3dcar`, `lpca`, `pca-btf` or `pca-rf`.
-    pub name: String,
-    /// The method's settings, e.g. `{"clusters": 20}`.
-    pub parameters: serde_json::Value,
+    /// The method and its settings (`name` and `parameters` in `report.json`).
+    #[serde(flatten)]
+    pub method: MethodId,
     /// Wall time of the analysis (fit), seconds.
     pub analysis_seconds: f64,
     /// Wall time to make one `synthesis_side`^2 image for one (view, light), seconds.
@@ -204,11 +300,11 @@ pub fn bench_mrf(
         Ok(model.image_from_cache(&cache, &view, &light)?)
     })?;
     let result = MethodResult {
-        name: kind.name().to_string(),
-        parameters: serde_json::json!({
-            "clusters": model.subspaces.len(),
-            "levels": model.levels(),
-        }),
+        method: MethodId::Mrf {
+            kind,
+            clusters: model.subspaces.len(),
+            levels: model.levels(),
+        },
         analysis_seconds,
         synthesis_seconds,
         model_bytes,
@@ -255,16 +351,8 @@ pub fn bench_baseline(
     tile(&model.reconstruct(0, 0)?, side, side);
     let synthesis_seconds = start.elapsed().as_secs_f64();
     let judge = mean_verdict(pairs, |v, l| Ok(model.reconstruct(v, l)?))?;
-    let parameters = match baseline.method {
-        Method::Lpca => serde_json::json!({
-            "clusters": baseline.clusters,
-            "components": baseline.components,
-        }),
-        _ => serde_json::json!({ "components": baseline.components }),
-    };
     let result = MethodResult {
-        name: baseline.method.name().to_string(),
-        parameters,
+        method: MethodId::Baseline(*baseline),
         analysis_seconds: report.load_seconds + report.fit_seconds,
         synthesis_seconds,
         model_bytes,
@@ -346,12 +434,87 @@ fn mean_levels(pairs: &JudgedPairs) -> Vec<LevelRow> {
         .collect()
 }
 
+/// A column of the table on which a method can beat the others (lower is better on each).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Axis {
+    /// Model file size.
+    ModelSize,
+    /// Analysis (fit) time.
+    AnalysisTime,
+    /// Synthesis time of the timed image.
+    SynthesisTime,
+    /// The judge's structure distance.
+    Structure,
+    /// Mean CIE76 ΔE (pixelwise methods only).
+    PixelError,
+}
+
+impl Axis {
+    /// Every axis, in the order the verdicts name them.
+    pub const ALL: [Axis; 5] = [
+        Axis::ModelSize,
+        Axis::AnalysisTime,
+        Axis::SynthesisTime,
+        Axis::Structure,
+        Axis::PixelError,
+    ];
+
+    /// What winning on the axis means, e.g. "smallest model".
+    pub fn phrase(self) -> &'static str {
+        match self {
+            Axis::ModelSize => "smallest model",
+            Axis::AnalysisTime => "fastest analysis",
+            Axis::SynthesisTime => "fastest synthesis",
+            Axis::Structure => "closest structure",
+            Axis::PixelError => "lowest pixelwise error",
+        }
+    }
+
+    /// The row's value on this axis and its cell as the table prints it; `None` where the
+    /// row has none (ΔE of an MRF model).
+    pub fn cell(self, m: &MethodResult) -> Option<(f64, String)> {
+        match self {
+            Axis::ModelSize => Some((m.model_bytes as f64, human(m.model_bytes))),
+            Axis::AnalysisTime => Some((m.analysis_seconds, format!("{:.2}", m.analysis_seconds))),
+            Axis::SynthesisTime => {
+                Some((m.synthesis_seconds, format!("{:.3}", m.synthesis_seconds)))
+            }
+            Axis::Structure => {
+                let v = m.judge.judgement.structure;
+                Some((v, format!("{v:.3}")))
+            }
+            Axis::PixelError => m.mean_delta_e.map(|e| (e, format!("{e:.2}"))),
+        }
+    }
+}
+
+/// A method's first place on one axis of the table.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Win {
+    /// The axis.
+    pub axis: Axis,
+    /// The other methods whose cell on the axis reads the same (a tie as the table shows it).
+    pub tied_with: Vec<MethodId>,
+}
+
 impl BenchReport {
-    /// The report as Markdown: the table and a sentence per method on where it wins.
+    /// The report as Markdown: a heading naming the input, then [`Self::markdown_body`].
     pub fn markdown(&self, plots: &[(&str, &str)]) -> String {
+        format!(
+            "# Speed against error: {}\n\n{}",
+            self.input,
+            self.markdown_body(plots, "")
+        )
+    }
+
+    /// The report without its heading, for embedding in a larger document: the table, a
+    /// sentence per method on where it wins, the side-by-side sheet and the `plots` ((title,
+    /// file) each). `prefix` is put before the sheet's and the plots' file names (e.g.
+    /// `bench/` when the report's files lie in that folder).
+    pub fn markdown_body(&self, plots: &[(&str, &str)], prefix: &str) -> String {
         let [v, l, h, w] = self.shape;
         let mut md = format!(
-            "# Speed against error: {}\n\n{v} views x {l} lights, {h}x{w} texels, {} raw \
+            "{v} views x {l} lights, {h}x{w} texels, {} raw \
              (8-bit RGB).\n\nΔE: mean CIE76 ΔE over all measured images (only for methods that \
              reproduce pixels). The texture judge, averaged over {} fixed measured (view, light) \
              pairs, compares each method's image with a crop of the measured one: structure \
@@ -361,7 +524,6 @@ impl BenchReport {
              spectrum), colour (mean |Lab quantile difference|, Lab units), and the std and \
              kurtosis of a* of the image. The reference levels are rows in italics. Synthesis: \
              see the notes under the table.\n\n",
-            self.input,
             human(self.raw_bytes),
             self.fidelity_pairs,
         );
@@ -370,17 +532,17 @@ impl BenchReport {
              | x crop | x RP | colour Lab | a* std | a* kurtosis |\n\
              |---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         );
+        let cell = |axis: Axis, m: &MethodResult| axis.cell(m).map_or("-".into(), |c| c.1);
         for m in &self.methods {
             md.push_str(&format!(
-                "| {} | {} | {:.2} | {:.3} | {} | 1:{:.0} | {} | {} |\n",
-                m.name,
-                compact(&m.parameters),
-                m.analysis_seconds,
-                m.synthesis_seconds,
-                human(m.model_bytes),
+                "| {} | {} | {} | {} | {} | 1:{:.0} | {} | {} |\n",
+                m.method.name(),
+                compact(&m.method.parameters()),
+                cell(Axis::AnalysisTime, m),
+                cell(Axis::SynthesisTime, m),
+                cell(Axis::ModelSize, m),
                 m.compression_ratio,
-                m.mean_delta_e
-                    .map_or("-".to_string(), |e| format!("{e:.2}")),
+                cell(Axis::PixelError, m),
                 judge_cells(&m.judge),
             ));
         }
@@ -394,8 +556,8 @@ impl BenchReport {
         md.push('\n');
         let mut notes: Vec<(&str, &str)> = Vec::new();
         for m in &self.methods {
-            if !notes.contains(&(m.name.as_str(), m.note.as_str())) {
-                notes.push((&m.name, &m.note));
+            if !notes.contains(&(m.method.name(), m.note.as_str())) {
+                notes.push((m.method.name(), &m.note));
             }
         }
         for (name, note) in notes {
@@ -406,65 +568,86 @@ impl BenchReport {
             md.push_str(&format!("- {line}\n"));
         }
         md.push('\n');
-        md.push_str(
-            "![side by side](sheet.png)\n\nTop: the measured image of the first judged pair, \
-             each MRF model's synthesis and each baseline's reconstruction; below: each MRF \
-             model's synthesis at twice the size.\n\n",
-        );
+        md.push_str(&format!(
+            "![side by side]({prefix}sheet.png)\n\nTop: the measured image of the first judged \
+             pair, each MRF model's synthesis and each baseline's reconstruction; below: each \
+             MRF model's synthesis at twice the size.\n\n"
+        ));
         for (title, file) in plots {
-            md.push_str(&format!("![{title}]({file})\n\n"));
+            md.push_str(&format!("![{title}]({prefix}{file})\n\n"));
         }
         md
     }
 
-    /// One sentence per method on where it wins, derived from the measured rows.
-    pub fn verdicts(&self) -> Vec<String> {
-        let best = |key: fn(&MethodResult) -> f64| {
-            self.methods
+    /// Each method's first places, row by row: on each axis the rows whose table cell reads
+    /// like the best row's. An axis on which every row reads the same is nobody's win (unless
+    /// there is only one row).
+    pub fn wins(&self) -> Vec<Vec<Win>> {
+        let mut wins: Vec<Vec<Win>> = vec![Vec::new(); self.methods.len()];
+        for axis in Axis::ALL {
+            let cells: Vec<Option<(f64, String)>> =
+                self.methods.iter().map(|m| axis.cell(m)).collect();
+            let Some(best) = cells
                 .iter()
-                .min_by(|a, b| key(a).total_cmp(&key(b)))
-                .map(|m| m.name.clone())
-        };
-        let smallest = best(|m| m.model_bytes as f64);
-        let fastest_fit = best(|m| m.analysis_seconds);
-        let fastest_synth = best(|m| m.synthesis_seconds);
-        let most_faithful = best(|m| m.judge.judgement.structure);
-        let least_error = best(|m| m.mean_delta_e.unwrap_or(f64::INFINITY));
+                .flatten()
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .map(|c| c.1.clone())
+            else {
+                continue;
+            };
+            let first: Vec<usize> = (0..cells.len())
+                .filter(|&i| cells[i].as_ref().is_some_and(|c| c.1 == best))
+                .collect();
+            let valued = cells.iter().flatten().count();
+            if first.len() == valued && valued > 1 {
+                continue;
+            }
+            for &i in &first {
+                wins[i].push(Win {
+                    axis,
+                    tied_with: first
+                        .iter()
+                        .filter(|&&j| j != i)
+                        .map(|&j| self.methods[j].method)
+                        .collect(),
+                });
+            }
+        }
+        wins
+    }
+
+    /// One sentence per method on where it wins ([`Self::wins`]), derived from the table.
+    pub fn verdicts(&self) -> Vec<String> {
         self.methods
             .iter()
-            .map(|m| {
-                let mut wins = Vec::new();
-                let is = |b: &Option<String>| b.as_deref() == Some(m.name.as_str());
-                if is(&smallest) {
-                    wins.push("smallest model");
-                }
-                if is(&fastest_fit) {
-                    wins.push("fastest analysis");
-                }
-                if is(&fastest_synth) {
-                    wins.push("fastest synthesis");
-                }
-                if is(&most_faithful) {
-                    wins.push("closest structure");
-                }
-                if m.mean_delta_e.is_some() && is(&least_error) {
-                    wins.push("lowest pixelwise error");
-                }
-                let what = if m.mean_delta_e.is_some() {
-                    "reproduces the measured pixels (no enlargement beyond tiling)"
-                } else {
+            .zip(self.wins())
+            .map(|(m, wins)| {
+                let what = if m.method.is_mrf() {
                     "synthesizes new texture of any size (no pixelwise fidelity)"
+                } else {
+                    "reproduces the measured pixels (no enlargement beyond tiling)"
                 };
+                let wins: Vec<String> = wins
+                    .iter()
+                    .map(|w| {
+                        if w.tied_with.is_empty() {
+                            w.axis.phrase().to_string()
+                        } else {
+                            let others: Vec<String> =
+                                w.tied_with.iter().map(|o| o.to_string()).collect();
+                            format!("{} (tied with {})", w.axis.phrase(), others.join(", "))
+                        }
+                    })
+                    .collect();
                 let wins = if wins.is_empty() {
                     "wins on no single axis here".to_string()
                 } else {
                     format!("wins on: {}", wins.join(", "))
                 };
                 format!(
-                    "**{} {}**: {what}; {wins} ({} at 1:{:.0}, structure {:.3} = {:.2}x the \
+                    "**{}**: {what}; {wins} ({} at 1:{:.0}, structure {:.3} = {:.2}x the \
                      another-crop level, {:.2}x the random-phase level; colour {:.2} Lab).",
-                    m.name,
-                    compact(&m.parameters),
+                    m.method,
                     human(m.model_bytes),
                     m.compression_ratio,
                     m.judge.judgement.structure,
@@ -491,16 +674,13 @@ fn judge_cells(v: &Verdict) -> String {
     )
 }
 
-/// `{"clusters":20,"levels":3}` as `clusters=20 levels=3`.
-fn compact(v: &serde_json::Value) -> String {
-    match v.as_object() {
-        Some(map) => map
-            .iter()
-            .map(|(k, v)| format!("{k}={v}"))
-            .collect::<Vec<_>>()
-            .join(" "),
-        None => v.to_string(),
-    }
+/// Parameters as `clusters=20 levels=3`.
+fn compact(p: &Parameters) -> String {
+    p.entries()
+        .iter()
+        .map(|(k, v)| format!("{k}={v}"))
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 fn human(bytes: u64) -> String {
@@ -647,5 +827,168 @@ impl BenchReport {
         )?;
         publish_dir(tmp, dir)?;
         Ok(plots)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::judge::Judgement;
+
+    fn verdict(structure: f64) -> Verdict {
+        Verdict {
+            judgement: Judgement {
+                structure,
+                groups: [structure; 7],
+                colour_lab: 1.0,
+                colour_lab_channels: [1.0; 3],
+                chroma_std: [2.0; 2],
+                chroma_kurtosis: [3.0; 2],
+            },
+            structure_vs_crop: 1.0,
+            structure_vs_random_phase: 1.0,
+        }
+    }
+
+    fn lpca(clusters: usize, components: usize) -> MethodId {
+        MethodId::Baseline(Baseline {
+            method: Method::Lpca,
+            clusters,
+            components,
+        })
+    }
+
+    /// A row: (method, model bytes, analysis s, synthesis s, structure, ΔE).
+    fn row(method: MethodId, bytes: u64, fit: f64, synth: f64, structure: f64) -> MethodResult {
+        MethodResult {
+            method,
+            analysis_seconds: fit,
+            synthesis_seconds: synth,
+            model_bytes: bytes,
+            compression_ratio: 1e6 / bytes as f64,
+            mean_delta_e: (!method.is_mrf()).then_some(structure * 10.0),
+            judge: verdict(structure),
+            note: "n".into(),
+        }
+    }
+
+    fn report(methods: Vec<MethodResult>) -> BenchReport {
+        BenchReport {
+            input: "x".into(),
+            shape: [1, 1, 8, 8],
+            raw_bytes: 1_000_000,
+            fidelity_pairs: 1,
+            levels: Vec::new(),
+            methods,
+        }
+    }
+
+    fn axes(wins: &[Win]) -> Vec<Axis> {
+        wins.iter().map(|w| w.axis).collect()
+    }
+
+    #[test]
+    fn the_better_of_two_runs_of_one_method_gets_the_wins() {
+        let car = MethodId::Mrf {
+            kind: ModelKind::Car2d,
+            clusters: 20,
+            levels: 3,
+        };
+        // LPCA 32x8 beats 8x4 on structure, ΔE and analysis time; 8x4 is smaller; the MRF
+        // model is the smallest and the slowest.
+        let r = report(vec![
+            row(car, 10_000, 9.0, 0.9, 0.5),
+            row(lpca(8, 4), 200_000, 5.0, 0.1, 0.3),
+            row(lpca(32, 8), 900_000, 4.0, 0.1, 0.2),
+        ]);
+        let wins = r.wins();
+        assert_eq!(axes(&wins[0]), [Axis::ModelSize]);
+        // Synthesis: 8x4 and 32x8 tie (same cell); everything else 32x8.
+        assert_eq!(axes(&wins[1]), [Axis::SynthesisTime]);
+        assert_eq!(wins[1][0].tied_with, [lpca(32, 8)]);
+        assert_eq!(
+            axes(&wins[2]),
+            [
+                Axis::AnalysisTime,
+                Axis::SynthesisTime,
+                Axis::Structure,
+                Axis::PixelError
+            ]
+        );
+        let text = r.verdicts();
+        assert!(
+            text[1].starts_with("**lpca clusters=8 components=4**"),
+            "{}",
+            text[1]
+        );
+        assert!(
+            text[1]
+                .contains("wins on: fastest synthesis (tied with lpca clusters=32 components=8)"),
+            "{}",
+            text[1]
+        );
+        assert!(!text[1].contains("closest structure"), "{}", text[1]);
+        assert!(text[2].contains("closest structure"), "{}", text[2]);
+        // What each sentence claims holds in the table: the winning cell is the column's least.
+        let md = r.markdown(&[]);
+        assert!(
+            md.contains("| lpca | clusters=32 components=8 | 4.00 | 0.100 | 878.9 KiB |"),
+            "{md}"
+        );
+    }
+
+    #[test]
+    fn a_tie_is_called_a_tie_and_a_column_all_alike_is_nobodys_win() {
+        let a = lpca(8, 4);
+        let b = lpca(16, 4);
+        // Sizes differ by 20 bytes: the table shows both as 9.8 KiB, a tie.
+        let r = report(vec![
+            row(a, 10_000, 1.0, 0.1, 0.3),
+            row(b, 10_020, 2.0, 0.1, 0.4),
+            row(lpca(32, 8), 50_000, 3.0, 0.1, 0.5),
+        ]);
+        let wins = r.wins();
+        let size_a = wins[0].iter().find(|w| w.axis == Axis::ModelSize).unwrap();
+        assert_eq!(size_a.tied_with, [b]);
+        assert!(wins[1].iter().any(|w| w.axis == Axis::ModelSize));
+        // Synthesis reads 0.100 in every row: nobody wins it.
+        assert!(wins.iter().flatten().all(|w| w.axis != Axis::SynthesisTime));
+        assert!(r.verdicts()[0].contains("smallest model (tied with lpca clusters=16"));
+        // One row wins what it has; an MRF row has no ΔE to win on.
+        let car = MethodId::Mrf {
+            kind: ModelKind::Gmrf,
+            clusters: 4,
+            levels: 2,
+        };
+        let solo = report(vec![row(car, 1, 1.0, 1.0, 1.0)]);
+        assert_eq!(
+            axes(&solo.wins()[0]),
+            [
+                Axis::ModelSize,
+                Axis::AnalysisTime,
+                Axis::SynthesisTime,
+                Axis::Structure
+            ]
+        );
+    }
+
+    #[test]
+    fn method_rows_serialize_as_name_and_parameters() {
+        let r = row(lpca(8, 4), 1000, 1.0, 1.0, 1.0);
+        let v = serde_json::to_value(&r).unwrap();
+        assert_eq!(v["name"], "lpca");
+        assert_eq!(
+            v["parameters"],
+            serde_json::json!({"clusters": 8, "components": 4})
+        );
+        let pca = MethodId::Baseline(Baseline {
+            method: Method::PcaBtf,
+            clusters: 1,
+            components: 8,
+        });
+        let v = serde_json::to_value(row(pca, 1000, 1.0, 1.0, 1.0)).unwrap();
+        assert_eq!(v["name"], "pca-btf");
+        assert_eq!(v["parameters"], serde_json::json!({"components": 8}));
+        assert_eq!(v["structure"], 1.0);
     }
 }

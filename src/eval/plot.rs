@@ -6,11 +6,12 @@ use std::sync::Once;
 
 use plotters::prelude::*;
 
-use super::bench::{BenchReport, MethodResult};
+use super::bench::{BenchReport, MethodId, MethodResult};
 use super::{EvalError, Result};
 use crate::btf::ImageFormat;
 use crate::btf::io::picture::encode_rgb8;
 use crate::io::write_file_atomic;
+use crate::lpca::Method;
 
 /// The embedded font (DejaVu Sans, see assets/fonts/DejaVuSans.LICENSE), so plots have text
 /// without system font libraries.
@@ -111,7 +112,7 @@ pub fn benchmark_plots(report: &BenchReport, dir: &Path) -> Result<Vec<(String, 
                     label: label(m),
                     x: x(m),
                     y: y(m)?,
-                    group: group(&m.name),
+                    group: group(&m.method),
                 })
             })
             .collect::<Vec<_>>()
@@ -156,36 +157,35 @@ pub fn benchmark_plots(report: &BenchReport, dir: &Path) -> Result<Vec<(String, 
     Ok(written)
 }
 
-/// A point's label: the method and its main parameters.
+/// A point's label: the method and its main parameters (`lpca K=8,C=4`).
 fn label(m: &MethodResult) -> String {
     let params: Vec<String> = m
-        .parameters
-        .as_object()
-        .map(|o| {
-            o.iter()
-                .filter(|(k, _)| k.as_str() != "levels")
-                .map(|(k, v)| match k.as_str() {
-                    "clusters" => format!("K={v}"),
-                    "components" => format!("C={v}"),
-                    _ => format!("{k}={v}"),
-                })
-                .collect()
+        .method
+        .parameters()
+        .entries()
+        .into_iter()
+        .filter_map(|(k, v)| match k {
+            "clusters" => Some(format!("K={v}")),
+            "components" => Some(format!("C={v}")),
+            _ => None,
         })
-        .unwrap_or_default();
+        .collect();
     if params.is_empty() {
-        m.name.clone()
+        m.method.name().to_string()
     } else {
-        format!("{} {}", m.name, params.join(","))
+        format!("{} {}", m.method.name(), params.join(","))
     }
 }
 
-/// MRF models in one colour family, PCA methods in others.
-fn group(name: &str) -> usize {
-    match name {
-        "gmrf" | "2dcar" | "3dcar" => 0,
-        "lpca" => 1,
-        "pca-btf" => 2,
-        _ => 3,
+/// MRF models in one colour family, each PCA method in another.
+fn group(method: &MethodId) -> usize {
+    match method {
+        MethodId::Mrf { .. } => 0,
+        MethodId::Baseline(b) => match b.method {
+            Method::Lpca => 1,
+            Method::PcaBtf => 2,
+            Method::PcaRf => 3,
+        },
     }
 }
 

@@ -15,7 +15,9 @@
 //! training set (Vácha & Haindl; features constant over the training set are ignored); colour
 //! histograms, histogram intersection; LBP histograms, L1.
 
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use nalgebra::Matrix3;
 use ndarray::{Array3, s};
@@ -28,8 +30,9 @@ use super::{FeatureError, FeatureOptions, Invariance, extract};
 use crate::btf::synthetic::SyntheticMaterial;
 use crate::btf::{Btf, BtfError, io};
 use crate::color::{Srgb8Encoder, linear_to_xyz, srgb8_to_linear_table, xyz_to_linear};
+use crate::progress::Progress;
 
-/// A descriptor and its distance.
+/// A descriptor and its distance (serialized as its table name).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Descriptor {
     /// All invariant MRF features, std-normalised L1.
@@ -62,6 +65,12 @@ impl Descriptor {
     }
 }
 
+impl serde::Serialize for Descriptor {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
 /// A labelled image set split into training and test images.
 #[derive(Debug, Clone)]
 pub struct Dataset {
@@ -80,8 +89,8 @@ pub struct Dataset {
 /// Accuracy of one method on one dataset.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Outcome {
-    /// The method's table name.
-    pub method: &'static str,
+    /// The method (its table name in JSON).
+    pub method: Descriptor,
     /// Test images assigned to their own class.
     pub correct: usize,
     /// Test images.
@@ -475,10 +484,258 @@ pub fn evaluate(
                 .filter(|(class, v)| nearest(&train, v, distance) == Some(*class))
                 .count();
             Ok(Outcome {
-                method: method.name(),
+                method,
                 correct,
                 total: test.len(),
             })
         })
         .collect()
+}
+
+/// What can stop the whole experiment.
+#[derive(Debug, thiserror::Error)]
+pub enum RecognitionError {
+    /// The data folder is missing or not a folder.
+    #[error("{}: {reason}", path.display())]
+    Data {
+        /// The folder given.
+        path: PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A dataset could not be read or made.
+    #[error(transparent)]
+    Btf(#[from] BtfError),
+    /// An image the features refuse.
+    #[error(transparent)]
+    Feature(#[from] FeatureError),
+}
+
+/// The settings of the whole experiment ([`run_experiment`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExperimentOptions {
+    /// Texels per side of the generated materials (dataset a).
+    pub size: u32,
+    /// Training images per generated material.
+    pub train: usize,
+    /// Test images per generated material.
+    pub test: usize,
+    /// The photographs are cut into `grid` x `grid` square crops (dataset c).
+    pub grid: usize,
+    /// Relit copies of every held-out photograph crop (at least 1 is made).
+    pub relit: usize,
+    /// Seed of every random choice (direction splits, illuminants).
+    pub seed: u64,
+}
+
+/// The environment variable naming the data folder when `btfmrf recognize` is given no
+/// `--data`.
+pub const DATA_ENV: &str = "BTFMRF_DATA";
+
+/// The RTI sets of dataset (b) lie in `DATA/rti`, one folder each.
+pub const RTI_FOLDER: &str = "rti";
+/// The photographs of dataset (c) lie in `DATA/textures` (PNG, JPEG or EXR).
+pub const TEXTURES_FOLDER: &str = "textures";
+
+/// Sorted entries of a folder that pass `keep`; empty if the folder is missing.
+fn entries(dir: &Path, keep: impl Fn(&Path) -> bool) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|r| r.filter_map(|e| e.ok().map(|e| e.path())).collect())
+        .unwrap_or_default();
+    v.retain(|p| keep(p));
+    v.sort();
+    v
+}
+
+/// The experiment's datasets: (a) the generated materials and (a) relit, always; (b) when
+/// `data/rti` holds at least two RTI folders; (c0) and (c) when `data/textures` holds at least
+/// two photographs. Returns the datasets and a note for each kind skipped.
+///
+/// # Errors
+/// `data` is not a folder, or a dataset fails to load.
+pub fn find_datasets(
+    data: &Path,
+    options: &ExperimentOptions,
+) -> Result<(Vec<Dataset>, Vec<String>), RecognitionError> {
+    if !data.is_dir() {
+        return Err(RecognitionError::Data {
+            path: data.to_path_buf(),
+            reason: format!(
+                "not a folder; the data folder holds {RTI_FOLDER}/ (RTI sets) and \
+                 {TEXTURES_FOLDER}/ (photographs)"
+            ),
+        });
+    }
+    let mut skipped = Vec::new();
+    let generated = synthetic_dataset(options.size, options.seed, options.train, options.test)?;
+    let relit = with_relit_tests(&generated, options.seed);
+    let mut datasets = vec![generated, relit];
+    let rti = entries(&data.join(RTI_FOLDER), |p| p.is_dir());
+    if rti.len() >= 2 {
+        datasets.push(rti_dataset(&rti, 4)?);
+    } else {
+        skipped.push(format!(
+            "(b) needs at least two RTI folders in {}",
+            data.join(RTI_FOLDER).display()
+        ));
+    }
+    let photos = entries(&data.join(TEXTURES_FOLDER), |p| {
+        p.extension().is_some_and(|e| {
+            matches!(
+                e.to_string_lossy().to_ascii_lowercase().as_str(),
+                "png" | "jpg" | "jpeg" | "exr"
+            )
+        })
+    });
+    if photos.len() >= 2 {
+        datasets.push(texture_dataset(&photos, options.grid, 0, options.seed)?);
+        datasets.push(texture_dataset(
+            &photos,
+            options.grid,
+            options.relit.max(1),
+            options.seed,
+        )?);
+    } else {
+        skipped.push(format!(
+            "(c) needs at least two photographs in {}",
+            data.join(TEXTURES_FOLDER).display()
+        ));
+    }
+    Ok((datasets, skipped))
+}
+
+/// One dataset's row of the report.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct DatasetResult {
+    /// Short name, e.g. "(b) real RTI sets".
+    pub name: String,
+    /// What the split is, in words.
+    pub description: String,
+    /// Class names.
+    pub classes: Vec<String>,
+    /// Training images.
+    pub train: usize,
+    /// Test images.
+    pub test: usize,
+    /// Each method's accuracy, in [`Method::ALL`] order.
+    pub results: Vec<MethodAccuracy>,
+}
+
+/// One method's accuracy on one dataset, as the report shows it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct MethodAccuracy {
+    /// The counts.
+    #[serde(flatten)]
+    pub outcome: Outcome,
+    /// `correct / total`.
+    pub accuracy: f64,
+}
+
+/// The whole experiment's result (the JSON of `btfmrf recognize --json`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RecognitionReport {
+    /// One row per dataset.
+    pub datasets: Vec<DatasetResult>,
+    /// A note per kind of dataset that was skipped for want of data.
+    pub skipped: Vec<String>,
+    /// Length of the MRF feature vector.
+    pub feature_length: usize,
+    /// Wall time of the whole experiment, seconds.
+    pub seconds: f64,
+}
+
+/// Runs the experiment on the datasets [`find_datasets`] finds under `data`, every method
+/// of [`Method::ALL`] with the default features.
+///
+/// # Errors
+/// See [`find_datasets`] and [`evaluate`].
+pub fn run_experiment(
+    data: &Path,
+    options: &ExperimentOptions,
+    progress: &dyn Progress,
+) -> Result<RecognitionReport, RecognitionError> {
+    let start = Instant::now();
+    let features = FeatureOptions::default();
+    let (datasets, skipped) = find_datasets(data, options)?;
+    progress.start("recognize", datasets.len() as u64);
+    let mut rows = Vec::new();
+    for d in &datasets {
+        let outcomes = evaluate(d, &Descriptor::ALL, &features)?;
+        rows.push(DatasetResult {
+            name: d.name.clone(),
+            description: d.description.clone(),
+            classes: d.classes.clone(),
+            train: d.train.len(),
+            test: d.test.len(),
+            results: outcomes
+                .into_iter()
+                .map(|o| MethodAccuracy {
+                    accuracy: o.accuracy(),
+                    outcome: o,
+                })
+                .collect(),
+        });
+        progress.advance(1);
+    }
+    progress.finish();
+    Ok(RecognitionReport {
+        datasets: rows,
+        skipped,
+        feature_length: features.len(),
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+impl RecognitionReport {
+    /// The report as Markdown: the accuracy table, a line per dataset and per skipped kind,
+    /// and how the methods compare images.
+    pub fn markdown(&self) -> String {
+        let mut s = String::new();
+        let _ = write!(s, "| dataset | classes | train | test |");
+        for m in Descriptor::ALL {
+            let _ = write!(s, " {} |", m.name());
+        }
+        s.push_str("\n|---|---|---|---|");
+        for _ in Descriptor::ALL {
+            s.push_str("---|");
+        }
+        s.push('\n');
+        for d in &self.datasets {
+            let _ = write!(
+                s,
+                "| {} | {} | {} | {} |",
+                d.name,
+                d.classes.len(),
+                d.train,
+                d.test
+            );
+            for r in &d.results {
+                let _ = write!(
+                    s,
+                    " {:.1} % ({}/{}) |",
+                    100.0 * r.accuracy,
+                    r.outcome.correct,
+                    r.outcome.total
+                );
+            }
+            s.push('\n');
+        }
+        s.push('\n');
+        for d in &self.datasets {
+            let _ = writeln!(s, "- {}: {}.", d.name, d.description);
+        }
+        for k in &self.skipped {
+            let _ = writeln!(s, "- skipped: {k}.");
+        }
+        let _ = writeln!(
+            s,
+            "\n1-NN. MRF: {} features (4-level Gaussian pyramid, order-2 causal \
+             neighbourhood), L1 after dividing each feature by its std over the training set; \
+             \"3x3-invariant\" keeps only the 3D CAR invariants. Colour histogram: joint 8x8x8 \
+             sRGB bins, intersection. LBP: uniform LBP(8,1) of luminance on 3 pyramid levels, L1. \
+             Total {:.1} s.",
+            self.feature_length, self.seconds
+        );
+        s
+    }
 }

@@ -8,7 +8,33 @@ use btfmrf::btf::Btf;
 use btfmrf::memory;
 use btfmrf::model::{ModelKind, format};
 
-use super::{Bar, Global, emit, human_bytes};
+use super::{Bar, Global, emit, emit_json, human_bytes};
+
+/// What `analyze --json` prints.
+#[derive(serde::Serialize)]
+struct AnalyzeReport<'a> {
+    /// `gmrf`, `2dcar` or `3dcar`.
+    model: &'static str,
+    analysis_seconds: f64,
+    model_bytes: u64,
+    raw_bytes: u64,
+    compression_ratio: f64,
+    clusters: usize,
+    levels: usize,
+    /// The stored range map's size; `None` without one.
+    range_map: Option<RangeMapSize>,
+    band_marginal_bytes: usize,
+    repairs: &'a [String],
+    warnings: &'a [String],
+}
+
+/// Rows, columns and step (measured texels per sample) of a stored range map.
+#[derive(serde::Serialize)]
+struct RangeMapSize {
+    rows: usize,
+    cols: usize,
+    step: usize,
+}
 
 /// Fit the probabilistic BTF model of Haindl and Filip: cluster the view x light space into
 /// subspace images (k-means on CIE Lab cumulative histograms), decorrelate colour (KL), split
@@ -98,19 +124,23 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let model_bytes = std::fs::metadata(&args.out)?.len();
     let ratio = btf.raw_bytes() as f64 / model_bytes as f64;
     if args.json {
-        emit(serde_json::json!({
-            "model": model.kind.name(),
-            "analysis_seconds": seconds,
-            "model_bytes": model_bytes,
-            "raw_bytes": btf.raw_bytes(),
-            "compression_ratio": ratio,
-            "clusters": model.subspaces.len(),
-            "levels": model.levels(),
-            "range_map": model.range_map.as_ref().map(|r| serde_json::json!({"rows": r.rows, "cols": r.cols, "step": r.step})),
-            "band_marginal_bytes": format::band_marginal_bytes(&model),
-            "repairs": report.repairs,
-            "warnings": report.warnings,
-        }))?;
+        emit_json(&AnalyzeReport {
+            model: model.kind.name(),
+            analysis_seconds: seconds,
+            model_bytes,
+            raw_bytes: btf.raw_bytes(),
+            compression_ratio: ratio,
+            clusters: model.subspaces.len(),
+            levels: model.levels(),
+            range_map: model.range_map.as_ref().map(|r| RangeMapSize {
+                rows: r.rows,
+                cols: r.cols,
+                step: r.step,
+            }),
+            band_marginal_bytes: format::band_marginal_bytes(&model),
+            repairs: &report.repairs,
+            warnings: &report.warnings,
+        })?;
     } else {
         if !report.repairs.is_empty() {
             eprintln!(

@@ -58,6 +58,14 @@ const RENDER_LIGHTS: [(f64, f64); 3] = [(30.0, 300.0), (60.0, 200.0), (75.0, 60.
 /// The lights of the comparisons, (theta, phi) in degrees: Bonn directions.
 const LIGHTS: [(f64, f64); 3] = [(30.0, 0.0), (60.0, 90.0), (75.0, 210.0)];
 
+/// The demo's one local-PCA size (keeps it short; `btfmrf bench` runs more): the model shown
+/// in the comparison and rendered per fragment.
+const DEMO_LPCA: Baseline = Baseline {
+    method: Method::Lpca,
+    clusters: 8,
+    components: 4,
+};
+
 pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let side = args.size as usize;
     let images = DirectionSet::bonn().len().pow(2);
@@ -108,13 +116,15 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     io::write_image(&dir.join("measured.png"), &measured_sheet(&btf)?)?;
 
     step(2, "fitting and measuring every method");
-    // One local-PCA size keeps the demo short; `btfmrf bench` runs more.
+    let mut baselines = vec![DEMO_LPCA];
+    baselines.extend(
+        Baseline::defaults()
+            .into_iter()
+            .filter(|b| b.method != Method::Lpca),
+    );
     let options = BenchOptions {
         seed: args.seed,
-        baselines: Baseline::defaults()
-            .into_iter()
-            .filter(|b| b.method != Method::Lpca || b.clusters == 8)
-            .collect(),
+        baselines,
         other_material: Some(other_material(args.material, args.size, args.seed)?),
         ..BenchOptions::default()
     };
@@ -143,19 +153,25 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let enlarged = enlargement(car2d, args.enlarge, args.seed)?;
     let enlarged_file = format!("enlarged-2dcar-{0}x{0}.png", enlarged.dim().1);
     io::write_image(&dir.join(&enlarged_file), &enlarged)?;
-    let lpca = run.baseline_models.first();
+    let lpca = options
+        .baselines
+        .iter()
+        .position(|b| *b == DEMO_LPCA)
+        .and_then(|i| run.baseline_models.get(i));
     let comparison = comparison(&btf, &run.mrf_models, lpca, args.seed)?;
     io::write_image(&dir.join("comparison.png"), &comparison)?;
 
     step(4, "rendering objects (wgpu)");
-    let lpca_model = lpca.filter(|m| m.method() == Method::Lpca);
-    let renders = renders(car2d, lpca_model, dir, &args)?;
+    let renders = renders(car2d, lpca, dir, &args)?;
 
     step(5, "writing the report");
+    let plots: Vec<(&str, &str)> = plots
+        .iter()
+        .map(|(t, f)| (t.as_str(), f.as_str()))
+        .collect();
     let mut md = report(
         &args,
-        &run.report.markdown(&[]),
-        &plots,
+        &run.report.markdown_body(&plots, "bench/"),
         &enlarged_file,
         start,
     );
@@ -362,13 +378,9 @@ fn comparison(
     Ok(montage(&rows, 6))
 }
 
-fn report(
-    args: &Args,
-    table: &str,
-    plots: &[(String, String)],
-    enlarged_file: &str,
-    start: Instant,
-) -> String {
+/// The demo's report.md; `bench` is the benchmark's report body
+/// ([`btfmrf::eval::bench::BenchReport::markdown_body`]).
+fn report(args: &Args, bench: &str, enlarged_file: &str, start: Instant) -> String {
     let mut md = format!(
         "# btfmrf demo: {material}\n\n\
          A procedural `{material}` material, rendered for all 81 x 81 Bonn view/light pairs at \
@@ -382,7 +394,8 @@ fn report(
          ## Measured against synthesized\n\n\
          Frontal view; rows: lights (theta, phi) = {lights:?}; columns: the measured image \
          (tiled 2 x 2), then GMRF, 2D CAR and 3D CAR syntheses at twice the measured size, and \
-         the local-PCA reconstruction (8 clusters x 4 components, tiled). The MRF models \
+         the local-PCA reconstruction ({lpca_clusters} clusters x {lpca_components} \
+         components, tiled). The MRF models \
          reproduce colour and second-order statistics, not the shapes of large structures; \
          LPCA reproduces the measured pixels but cannot make new texture.\n\n\
          ![comparison](comparison.png)\n\n\
@@ -395,21 +408,11 @@ fn report(
         secs = start.elapsed().as_secs_f64(),
         lights = LIGHTS,
         side = args.enlarge,
+        lpca_clusters = DEMO_LPCA.clusters,
+        lpca_components = DEMO_LPCA.components,
     );
-    // The benchmark's own report, one level down, with its plots' paths adjusted.
+    // The benchmark's own report, one level down, its files in bench/.
     md.push_str("## Speed against error\n\n");
-    md.push_str(
-        table
-            .lines()
-            .skip_while(|l| l.starts_with("# ") || l.is_empty())
-            .collect::<Vec<_>>()
-            .join("\n")
-            .replace("](sheet.png)", "](bench/sheet.png)")
-            .trim_end(),
-    );
-    md.push_str("\n\n");
-    for (title, file) in plots {
-        md.push_str(&format!("![{title}](bench/{file})\n\n"));
-    }
+    md.push_str(bench);
     md
 }

@@ -5,12 +5,41 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use btfmrf::btf::{Btf, Direction, io};
-use btfmrf::features::{FeatureOptions, extract};
+use btfmrf::features::{FeatureOptions, Invariance, extract};
 use btfmrf::progress::Progress;
 use rayon::prelude::*;
 
 use super::synthesize::parse_direction;
-use super::{Bar, Global, emit};
+use super::{Bar, Global, emit, emit_json};
+
+/// What `features --json` prints.
+#[derive(serde::Serialize)]
+struct FeaturesReport<'a> {
+    path: &'a Path,
+    /// "image", "btf image NAME" or "btf mean of N images".
+    source: &'a str,
+    width: usize,
+    height: usize,
+    images: usize,
+    levels: usize,
+    order: usize,
+    length: usize,
+    features: &'a [f64],
+    names: &'a [String],
+    invariance: Vec<Invariance>,
+    seconds: f64,
+    /// With --all: every image's vector.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    per_image: Option<Vec<ImageFeatures>>,
+}
+
+/// One image's feature vector; directions as [theta, phi] in degrees.
+#[derive(serde::Serialize)]
+struct ImageFeatures {
+    view: [f64; 2],
+    light: [f64; 2],
+    features: Vec<f64>,
+}
 
 /// Compute the illumination-invariant texture features (3D/2D CAR models on a Gaussian
 /// pyramid; invariant to the illuminant's colour and brightness) of an image or a BTF.
@@ -67,7 +96,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let features_of = |image: &ndarray::Array3<f32>, what: &str| {
         extract(image, &options).with_context(|| format!("{}: {what}", path.display()))
     };
-    let mut per_image: Vec<serde_json::Value> = Vec::new();
+    let mut per_image: Vec<ImageFeatures> = Vec::new();
     let (vector, source, width, height, images) = if is_image(path) {
         if args.view.is_some() || args.all {
             bail!(
@@ -130,16 +159,14 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                 .map(|i| vectors.iter().map(|v| v[i]).sum::<f64>() / n)
                 .collect();
             if args.all {
-                let dir = |d: &Direction| serde_json::json!([d.theta_deg, d.phi_deg]);
+                let dir = |d: &Direction| [d.theta_deg, d.phi_deg];
                 per_image = pairs
                     .iter()
                     .zip(vectors)
-                    .map(|(&(v, l), f)| {
-                        serde_json::json!({
-                            "view": dir(&btf.views().as_slice()[v]),
-                            "light": dir(&btf.lights().as_slice()[l]),
-                            "features": f,
-                        })
+                    .map(|(&(v, l), features)| ImageFeatures {
+                        view: dir(&btf.views().as_slice()[v]),
+                        light: dir(&btf.lights().as_slice()[l]),
+                        features,
                     })
                     .collect();
             }
@@ -155,24 +182,21 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let seconds = start.elapsed().as_secs_f64();
     let names = options.names();
     if args.json {
-        let mut report = serde_json::json!({
-            "path": path,
-            "source": source,
-            "width": width,
-            "height": height,
-            "images": images,
-            "levels": options.levels,
-            "order": options.order,
-            "length": vector.len(),
-            "features": vector,
-            "names": names,
-            "invariance": options.invariances(),
-            "seconds": seconds,
-        });
-        if args.all {
-            report["per_image"] = serde_json::Value::Array(per_image);
-        }
-        emit(report)?;
+        emit_json(&FeaturesReport {
+            path,
+            source: &source,
+            width,
+            height,
+            images,
+            levels: options.levels,
+            order: options.order,
+            length: vector.len(),
+            features: &vector,
+            names: &names,
+            invariance: options.invariances(),
+            seconds,
+            per_image: args.all.then_some(per_image),
+        })?;
     } else {
         emit(format!(
             "{}: {} features ({source}, {width}x{height}) in {seconds:.3} s",

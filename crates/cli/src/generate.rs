@@ -7,7 +7,23 @@ use anyhow::Context;
 use btfmrf::btf::io;
 use btfmrf::btf::synthetic::{SyntheticBtf, SyntheticMaterial};
 
-use super::{Bar, Global, OutputFormat, emit, human_bytes};
+use super::{Bar, Global, OutputFormat, emit, emit_json, human_bytes};
+
+/// What `generate --json` prints.
+#[derive(serde::Serialize)]
+struct GenerateReport<'a> {
+    material: &'static str,
+    seed: u64,
+    width: u32,
+    height: u32,
+    views: usize,
+    lights: usize,
+    images: usize,
+    out: &'a std::path::Path,
+    /// Bytes written (the zip, or the folder's files).
+    out_bytes: u64,
+    seconds: f64,
+}
 
 /// Render a procedural material (a ray-marched height field with a spatially varying BRDF,
 /// cast shadows and parallax) for all 81 x 81 Bonn view/light pairs, and write it in the Bonn
@@ -57,19 +73,18 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let seconds = start.elapsed().as_secs_f64();
     let bytes = disk_bytes(&args.out);
     if args.json {
-        let report = serde_json::json!({
-            "material": args.material.name(),
-            "seed": args.seed,
-            "width": btf.width(),
-            "height": btf.height(),
-            "views": btf.views().len(),
-            "lights": btf.lights().len(),
-            "images": btf.image_count(),
-            "out": args.out,
-            "out_bytes": bytes,
-            "seconds": seconds,
-        });
-        emit(report)?;
+        emit_json(&GenerateReport {
+            material: args.material.name(),
+            seed: args.seed,
+            width: btf.width(),
+            height: btf.height(),
+            views: btf.views().len(),
+            lights: btf.lights().len(),
+            images: btf.image_count(),
+            out: &args.out,
+            out_bytes: bytes,
+            seconds,
+        })?;
     } else {
         emit(format!(
             "wrote {} ({} images of {}x{}, {}) in {:.1} s",

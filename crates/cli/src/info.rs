@@ -3,25 +3,53 @@
 use std::path::PathBuf;
 
 use btfmrf::btf::{Btf, DirectionSet};
+use btfmrf::source::{AnyModel, ModelFile};
 
-use super::{Global, emit, human_bytes};
+use super::{Global, emit, emit_json, human_bytes};
 
 /// Describe a BTF: its view and light directions, image size and raw size. Reads and checks
 /// the whole layout (names, directions, image headers) without decoding pixels.
 ///
-/// Accepts a UBO2003 zip or folder, an RTI folder (with a .lp file) or a .lp file.
+/// Accepts a UBO2003 zip or folder, an RTI folder or zip (with a .lp file) or a .lp file; a
+/// model file (.btfm or .lpca, told by its first bytes) is described too: its kind, size and
+/// measured directions.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The BTF: FILE.zip, a folder, or an RTI .lp file.
+    /// The BTF: FILE.zip, a folder, or an RTI .lp file; or a model file.
     btf: PathBuf,
     /// Print one JSON object (views, lights, width, height, images, raw_bytes, directions).
     #[arg(long)]
     json: bool,
 }
 
-fn directions_json(set: &DirectionSet) -> serde_json::Value {
+/// What `info --json` prints.
+#[derive(serde::Serialize)]
+struct InfoReport<'a> {
+    path: &'a std::path::Path,
+    views: usize,
+    lights: usize,
+    width: u32,
+    height: u32,
+    images: usize,
+    raw_bytes: u64,
+    view_directions: Vec<Angles>,
+    light_directions: Vec<Angles>,
+    warnings: &'a [String],
+}
+
+/// A direction in degrees.
+#[derive(serde::Serialize)]
+struct Angles {
+    theta_deg: f64,
+    phi_deg: f64,
+}
+
+fn angles(set: &DirectionSet) -> Vec<Angles> {
     set.iter()
-        .map(|d| serde_json::json!({"theta_deg": d.theta_deg, "phi_deg": d.phi_deg}))
+        .map(|d| Angles {
+            theta_deg: d.theta_deg,
+            phi_deg: d.phi_deg,
+        })
         .collect()
 }
 
@@ -39,25 +67,106 @@ fn summary(set: &DirectionSet) -> String {
     )
 }
 
+/// What `info --json` prints for a model file.
+#[derive(serde::Serialize)]
+struct ModelInfo<'a> {
+    path: &'a std::path::Path,
+    /// "btfm" or "lpca".
+    format: &'static str,
+    /// `gmrf`, `2dcar`, `3dcar`, `lpca`, `pca-btf` or `pca-rf`.
+    model: &'static str,
+    /// Subspace images (MRF) or clusters (PCA).
+    clusters: usize,
+    /// Pyramid levels (MRF only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    levels: Option<usize>,
+    /// Principal components per cluster (PCA only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    components: Option<usize>,
+    /// The measured tile, pixels.
+    width: usize,
+    height: usize,
+    views: usize,
+    lights: usize,
+    view_directions: Vec<Angles>,
+    light_directions: Vec<Angles>,
+}
+
+fn describe_model(path: &std::path::Path, json: bool) -> anyhow::Result<()> {
+    let model = AnyModel::open(path)?;
+    let info = match &model {
+        AnyModel::Mrf(m) => ModelInfo {
+            path,
+            format: "btfm",
+            model: m.kind.name(),
+            clusters: m.subspaces.len(),
+            levels: Some(m.levels()),
+            components: None,
+            width: m.width as usize,
+            height: m.height as usize,
+            views: m.views.len(),
+            lights: m.lights.len(),
+            view_directions: angles(&m.views),
+            light_directions: angles(&m.lights),
+        },
+        AnyModel::Lpca(m) => ModelInfo {
+            path,
+            format: "lpca",
+            model: m.method().name(),
+            clusters: m.clusters(),
+            levels: None,
+            components: Some(m.components()),
+            width: m.width(),
+            height: m.height(),
+            views: m.views().len(),
+            lights: m.lights().len(),
+            view_directions: angles(m.views()),
+            light_directions: angles(m.lights()),
+        },
+    };
+    if json {
+        return emit_json(&info);
+    }
+    let parts = match (info.levels, info.components) {
+        (Some(levels), _) => format!("{} subspace images, {levels} levels", info.clusters),
+        (_, Some(c)) => format!("{} cluster(s) x {c} components", info.clusters),
+        _ => String::new(),
+    };
+    emit(format!(
+        "{}: {} model (.{}), {parts}",
+        path.display(),
+        info.model,
+        info.format
+    ))?;
+    emit(format!("  views:  {}", summary(model.views())))?;
+    emit(format!("  lights: {}", summary(model.lights())))?;
+    emit(format!(
+        "  measured tile: {} x {} pixels",
+        info.width, info.height
+    ))
+}
+
 pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
+    if ModelFile::of(&args.btf)?.is_some() {
+        return describe_model(&args.btf, args.json);
+    }
     let btf = Btf::open(&args.btf)?;
     for w in btf.warnings() {
         eprintln!("warning: {w}");
     }
     if args.json {
-        let report = serde_json::json!({
-            "path": args.btf,
-            "views": btf.views().len(),
-            "lights": btf.lights().len(),
-            "width": btf.width(),
-            "height": btf.height(),
-            "images": btf.image_count(),
-            "raw_bytes": btf.raw_bytes(),
-            "view_directions": directions_json(btf.views()),
-            "light_directions": directions_json(btf.lights()),
-            "warnings": btf.warnings(),
-        });
-        emit(report)?;
+        emit_json(&InfoReport {
+            path: &args.btf,
+            views: btf.views().len(),
+            lights: btf.lights().len(),
+            width: btf.width(),
+            height: btf.height(),
+            images: btf.image_count(),
+            raw_bytes: btf.raw_bytes(),
+            view_directions: angles(btf.views()),
+            light_directions: angles(btf.lights()),
+            warnings: btf.warnings(),
+        })?;
     } else {
         emit(btf.label())?;
         emit(format!("  views:  {}", summary(btf.views())))?;

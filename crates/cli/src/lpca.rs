@@ -8,7 +8,58 @@ use btfmrf::btf::Btf;
 use btfmrf::lpca::{LpcaModel, LpcaOptions, Method, format};
 use btfmrf::memory;
 
-use super::{Bar, Global, emit, human_bytes};
+use super::{Bar, Global, emit, emit_json, human_bytes};
+
+/// What `lpca --json` prints.
+#[derive(serde::Serialize)]
+struct LpcaSummary<'a> {
+    method: &'static str,
+    btf: &'a std::path::Path,
+    out: &'a std::path::Path,
+    width: usize,
+    height: usize,
+    views: usize,
+    lights: usize,
+    clusters: usize,
+    components: usize,
+    iterations: usize,
+    converged: bool,
+    /// The last iteration's mean squared error.
+    mean_squared_error: Option<f64>,
+    analysis_seconds: f64,
+    load_seconds: f64,
+    fit_seconds: f64,
+    evaluation_seconds: f64,
+    total_seconds: f64,
+    model_bytes: u64,
+    raw_bytes: u64,
+    compression_ratio: f64,
+    mean_delta_e: f64,
+    psnr_db: f64,
+    per_view_delta_e: Vec<ViewError>,
+    worst_image: WorstImage,
+}
+
+/// Mean ΔE of one view's images.
+#[derive(serde::Serialize)]
+struct ViewError {
+    view: usize,
+    theta: f64,
+    phi: f64,
+    delta_e: f64,
+}
+
+/// The image with the largest mean ΔE.
+#[derive(serde::Serialize)]
+struct WorstImage {
+    view: usize,
+    light: usize,
+    view_theta: f64,
+    view_phi: f64,
+    light_theta: f64,
+    light_phi: f64,
+    delta_e: f64,
+}
 
 /// Compress a BTF by local PCA (Müller, Meseth and Klein 2003): every texel's apparent BRDF
 /// (all its view x light x RGB values) is assigned to one of K clusters, each a mean plus C
@@ -125,46 +176,52 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         &lights.as_slice()[worst % nl],
     );
     if args.json {
-        let per_view: Vec<_> = report
+        let per_view: Vec<ViewError> = report
             .per_view_delta_e
             .iter()
             .zip(views.iter())
             .enumerate()
-            .map(|(v, (de, d))| {
-                serde_json::json!({"view": v, "theta": d.theta_deg, "phi": d.phi_deg, "delta_e": de})
+            .map(|(view, (&delta_e, d))| ViewError {
+                view,
+                theta: d.theta_deg,
+                phi: d.phi_deg,
+                delta_e,
             })
             .collect();
-        emit(serde_json::json!({
-            "method": method.name(),
-            "btf": args.btf,
-            "out": args.out,
-            "width": model.width(),
-            "height": model.height(),
-            "views": views.len(),
-            "lights": nl,
-            "clusters": model.clusters(),
-            "components": model.components(),
-            "iterations": report.iterations,
-            "converged": report.converged,
-            "mean_squared_error": report.error_history.last(),
-            "analysis_seconds": analysis_seconds,
-            "load_seconds": report.load_seconds,
-            "fit_seconds": report.fit_seconds,
-            "evaluation_seconds": report.evaluation_seconds,
-            "total_seconds": total,
-            "model_bytes": model_bytes,
-            "raw_bytes": btf.raw_bytes(),
-            "compression_ratio": ratio,
-            "mean_delta_e": report.mean_delta_e,
-            "psnr_db": report.psnr_db,
-            "per_view_delta_e": per_view,
-            "worst_image": {
-                "view": worst / nl, "light": worst % nl,
-                "view_theta": wv.theta_deg, "view_phi": wv.phi_deg,
-                "light_theta": wl.theta_deg, "light_phi": wl.phi_deg,
-                "delta_e": worst_de,
+        emit_json(&LpcaSummary {
+            method: method.name(),
+            btf: &args.btf,
+            out: &args.out,
+            width: model.width(),
+            height: model.height(),
+            views: views.len(),
+            lights: nl,
+            clusters: model.clusters(),
+            components: model.components(),
+            iterations: report.iterations,
+            converged: report.converged,
+            mean_squared_error: report.error_history.last().copied(),
+            analysis_seconds,
+            load_seconds: report.load_seconds,
+            fit_seconds: report.fit_seconds,
+            evaluation_seconds: report.evaluation_seconds,
+            total_seconds: total,
+            model_bytes,
+            raw_bytes: btf.raw_bytes(),
+            compression_ratio: ratio,
+            mean_delta_e: report.mean_delta_e,
+            psnr_db: report.psnr_db,
+            per_view_delta_e: per_view,
+            worst_image: WorstImage {
+                view: worst / nl,
+                light: worst % nl,
+                view_theta: wv.theta_deg,
+                view_phi: wv.phi_deg,
+                light_theta: wl.theta_deg,
+                light_phi: wl.phi_deg,
+                delta_e: worst_de,
             },
-        }))
+        })
     } else {
         emit(format!(
             "wrote {} ({}, {} cluster(s) x {} components, {} iterations): {} for {} raw, 1:{:.1}; \

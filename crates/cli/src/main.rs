@@ -30,8 +30,8 @@ use btfmrf::progress::Progress;
 /// btfmrf: measured BTFs to Markov-random-field models of a few tens of kilobytes, and back.
 ///
 /// A BTF (bidirectional texture function) is a material photographed under many view and
-/// light directions. This tool reads them (Bonn UBO2003 zips or folders, RTI folders with a
-/// .lp file), generates procedural reference materials, and converts between layouts.
+/// light directions. This tool reads them (Bonn UBO2003 zips or folders, RTI folders or zips
+/// with a .lp file), generates procedural reference materials, and converts between layouts.
 ///
 /// Examples:
 ///   btfmrf generate sponge --size 128 --out sponge.zip
@@ -40,7 +40,7 @@ use btfmrf::progress::Progress;
 ///   btfmrf analyze sponge.zip --model 2dcar --out sponge.btfm
 ///   btfmrf synthesize sponge.btfm --size 1024 --view 0,0 --light 45,90 --out big.png
 ///   btfmrf features brick.png --json
-///   btfmrf recognize --out recognition.md
+///   btfmrf recognize --data DIR --out recognition.md
 ///   btfmrf render sponge.btfm --out sphere.png --mesh sphere --mapping bump
 ///   btfmrf lpca sponge.zip --clusters 32 --components 8 --out sponge.lpca
 #[derive(Debug, Parser)]
@@ -247,6 +247,11 @@ pub fn emit(line: impl std::fmt::Display) -> anyhow::Result<()> {
         Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
         _ => Ok(()),
     }
+}
+
+/// Prints a report as one line of JSON ([`emit`]).
+pub fn emit_json(report: &impl serde::Serialize) -> anyhow::Result<()> {
+    emit(serde_json::to_string(report)?)
 }
 
 /// Bytes in a human-friendly unit.

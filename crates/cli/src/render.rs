@@ -7,6 +7,7 @@ use btfmrf::btf::{Direction, io};
 use btfmrf::lpca;
 use btfmrf::memory;
 use btfmrf::model::format;
+use btfmrf::source::ModelFile;
 use btfmrf_render::{
     Camera, Light, Mapping, Material, MeshKind, ModelRenderOptions, RenderStats, Renderer, Scene,
 };
@@ -121,14 +122,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             btfmrf_render::MAX_RENDER_SIDE
         );
     }
-    let is_lpca = {
-        use std::io::Read;
-        let mut head = Vec::new();
-        std::fs::File::open(&args.model)
-            .and_then(|f| f.take(8).read_to_end(&mut head))
-            .with_context(|| format!("reading {}", args.model.display()))?;
-        lpca::format::is_lpca(&head)
-    };
+    let is_lpca = ModelFile::of(&args.model)? == Some(ModelFile::Lpca);
     if is_lpca && let Some(m) = args.mapping {
         anyhow::bail!(
             "invalid --mapping {m}: {} is an LPCA model, decoded on the mesh as it is \

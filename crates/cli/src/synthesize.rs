@@ -5,22 +5,38 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use btfmrf::btf::{Btf, BtfError, Direction, DirectionSet, ImageSource, io};
+use btfmrf::btf::{Direction, DirectionSet, io};
 use btfmrf::lpca;
 use btfmrf::memory;
-use btfmrf::model::{MaterialModel, format};
-use btfmrf::synthesis::{SynthesisCache, SynthesisOptions};
-use ndarray::Array3;
+use btfmrf::source::{AnyModel, LpcaImages, ModelImages};
+use btfmrf::synthesis::SynthesisOptions;
 
-use super::{Bar, Global, emit};
+use super::{Bar, Global, emit, emit_json};
+
+/// What `synthesize --json` prints.
+#[derive(serde::Serialize)]
+struct SynthesizeReport<'a> {
+    out: &'a std::path::Path,
+    images: usize,
+    /// Subspace images synthesized for the request (MRF models only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    subspaces_synthesized: Option<usize>,
+    /// Subspace images of the model (MRF models only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    subspaces_total: Option<usize>,
+    synthesis_seconds: f64,
+}
 
 /// Synthesize from a model: any size, any view and light, seed-deterministic. Only the
 /// subspace images that the requested (view, light) pairs need are synthesized.
 ///
 /// With one --view and one --light and an --out ending in .png or .exr, writes that one image;
-/// otherwise a UBO2003 zip (--out X.zip) or folder of every requested view x light (the
-/// model's measured directions when none are given). Directions that were not measured are
-/// interpolated from the nearest measured pairs.
+/// otherwise a zip (--out X.zip) or folder of every requested view x light (the model's
+/// measured directions when none are given): with UBO2003 names when every direction is in
+/// whole degrees (the names hold whole degrees only), else, for a single-view model such as
+/// one of an RTI set, an RTI capture (images 000.png, ... and dirs.lp with the exact light
+/// vectors). Directions that were not measured are interpolated from the nearest measured
+/// pairs.
 ///
 /// Examples:
 ///   btfmrf synthesize stones.btfm --size 1024 --view 0,0 --light 45,90 --out lit.png
@@ -43,7 +59,9 @@ pub struct Args {
     /// Seed of the driving noise: same seed, same bytes.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Make the images tile seamlessly (size must be divisible by 2^(levels-1)).
+    /// Make the images tile seamlessly (size must be divisible by 2^(levels-1)). Costs about
+    /// as much as plain synthesis: 1.0x the CPU time for a 2D CAR model at 1024x1024 (median
+    /// of 3, docs/BENCHMARKS.md).
     #[arg(long)]
     tileable: bool,
     /// Output: X.png or X.exr (one image), X.zip or a new folder (a BTF).
@@ -114,35 +132,11 @@ pub(super) fn extrapolation_warning(
     })
 }
 
-/// Synthesized images as a BTF, drawing on one synthesis cache.
-struct ModelSource {
-    model: MaterialModel,
-    cache: SynthesisCache,
-    views: DirectionSet,
-    lights: DirectionSet,
-}
-
-impl ImageSource for ModelSource {
-    fn load(&self, view: usize, light: usize) -> Result<Array3<f32>, BtfError> {
-        let (v, l) = (self.views.as_slice()[view], self.lights.as_slice()[light]);
-        self.model
-            .image_from_cache(&self.cache, &v, &l)
-            .map_err(|e| BtfError::Image {
-                file: self.describe(view, light),
-                reason: e.to_string(),
-            })
-    }
-
-    fn describe(&self, view: usize, light: usize) -> String {
-        format!("synthesized image (view {view}, light {light})")
-    }
-}
-
 pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
-    if is_lpca_file(&args.model)? {
-        return run_lpca(args, global);
-    }
-    let model = format::read(&args.model)?;
+    let model = match AnyModel::open(&args.model)? {
+        AnyModel::Mrf(model) => *model,
+        AnyModel::Lpca(model) => return run_lpca(*model, args, global),
+    };
     let Some((rows, cols)) = args.size else {
         bail!(
             "--size is required for a .btfm model ({})",
@@ -203,21 +197,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     }
     let bytes = memory::btf_synthesis_bytes;
     global.check_synthesis("--size", (rows, cols), needed.len(), bytes)?;
-    let source = ModelSource {
-        cache: model.synthesis_cache(&options)?,
-        model,
-        views: views.clone(),
-        lights: lights.clone(),
-    };
-    let btf = Btf::from_source(
-        "synthesized",
-        views,
-        lights,
-        cols as u32,
-        rows as u32,
-        Box::new(source),
-    )?;
-    io::write_ubo2003(
+    let btf = ModelImages::into_btf(model, views, lights, &options)?;
+    io::write_btf(
         &btf,
         &args.out,
         args.format.with_quality(90),
@@ -243,13 +224,13 @@ fn report(
     seconds: f64,
 ) -> anyhow::Result<()> {
     if json {
-        emit(serde_json::json!({
-            "out": out,
-            "images": images,
-            "subspaces_synthesized": used,
-            "subspaces_total": total,
-            "synthesis_seconds": seconds,
-        }))
+        emit_json(&SynthesizeReport {
+            out,
+            images,
+            subspaces_synthesized: Some(used),
+            subspaces_total: Some(total),
+            synthesis_seconds: seconds,
+        })
     } else {
         emit(format!(
             "wrote {} ({images} image(s); {used} of {total} subspace images synthesized) in {seconds:.3} s",
@@ -258,43 +239,9 @@ fn report(
     }
 }
 
-/// Whether the file starts with the `.lpca` magic bytes (the extension is not trusted).
-fn is_lpca_file(path: &std::path::Path) -> anyhow::Result<bool> {
-    use std::io::Read;
-    let mut head = Vec::with_capacity(4);
-    std::fs::File::open(path)
-        .and_then(|f| f.take(4).read_to_end(&mut head))
-        .with_context(|| format!("reading {}", path.display()))?;
-    Ok(lpca::format::is_lpca(&head))
-}
-
-/// Images of an LPCA model for any view and light directions (3 x 3 interpolation).
-struct LpcaSource {
-    model: lpca::LpcaModel,
-    views: DirectionSet,
-    lights: DirectionSet,
-}
-
-impl ImageSource for LpcaSource {
-    fn load(&self, view: usize, light: usize) -> Result<Array3<f32>, BtfError> {
-        let (v, l) = (self.views.as_slice()[view], self.lights.as_slice()[light]);
-        self.model
-            .reconstruct_direction(&v, &l)
-            .map_err(|e| BtfError::Image {
-                file: self.describe(view, light),
-                reason: e.to_string(),
-            })
-    }
-
-    fn describe(&self, view: usize, light: usize) -> String {
-        format!("reconstructed image (view {view}, light {light})")
-    }
-}
-
 /// `synthesize` for a `.lpca` model: the measured tile rebuilt under the requested (or all
 /// measured) directions.
-fn run_lpca(args: Args, global: &Global) -> anyhow::Result<()> {
-    let model = lpca::format::read(&args.model)?;
+fn run_lpca(model: lpca::LpcaModel, args: Args, global: &Global) -> anyhow::Result<()> {
     let (h, w) = (model.height(), model.width());
     if let Some((rows, cols)) = args.size
         && (rows, cols) != (h, w)
@@ -331,21 +278,9 @@ fn run_lpca(args: Args, global: &Global) -> anyhow::Result<()> {
             } else {
                 DirectionSet::new(args.light.clone())?
             };
-            let source = LpcaSource {
-                model,
-                views: views.clone(),
-                lights: lights.clone(),
-            };
-            Btf::from_source(
-                "reconstructed",
-                views,
-                lights,
-                w as u32,
-                h as u32,
-                Box::new(source),
-            )?
+            LpcaImages::into_btf(model, views, lights)?
         };
-        io::write_ubo2003(
+        io::write_btf(
             &btf,
             &args.out,
             args.format.with_quality(90),
@@ -355,11 +290,13 @@ fn run_lpca(args: Args, global: &Global) -> anyhow::Result<()> {
     };
     let seconds = start.elapsed().as_secs_f64();
     if args.json {
-        emit(serde_json::json!({
-            "out": args.out,
-            "images": images,
-            "synthesis_seconds": seconds,
-        }))
+        emit_json(&SynthesizeReport {
+            out: &args.out,
+            images,
+            subspaces_synthesized: None,
+            subspaces_total: None,
+            synthesis_seconds: seconds,
+        })
     } else {
         emit(format!(
             "wrote {} ({images} image(s) rebuilt from the LPCA model) in {seconds:.3} s",

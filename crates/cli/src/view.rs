@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use btfmrf::btf::Direction;
-use btfmrf::model::format;
+use btfmrf::source::AnyModel;
 use btfmrf_render::viewer::{ViewerOptions, run_viewer};
 use btfmrf_render::{Mapping, MeshKind};
 
@@ -64,7 +64,13 @@ pub struct Args {
 pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
     let (rows, cols) = args.size;
     btfmrf_render::frame::check_size(u32::try_from(cols)?, u32::try_from(rows)?)?;
-    let model = format::read(&args.model)?;
+    let model = match AnyModel::open(&args.model)? {
+        AnyModel::Mrf(model) => *model,
+        AnyModel::Lpca(_) => anyhow::bail!(
+            "{}: an LPCA model; the viewer shows .btfm models (render this one with btfmrf render)",
+            args.model.display()
+        ),
+    };
     let mut meshes = vec![args.mesh.clone()];
     for kind in [
         MeshKind::Sphere,

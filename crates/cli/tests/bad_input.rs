@@ -239,6 +239,46 @@ fn rti_lp_naming_a_missing_image() {
     assert!(err.contains("dirs.lp") && err.contains("'b.png'"), "{err}");
 }
 
+/// An RTI zip: its `.lp` member names images relative to its folder in the archive; a
+/// missing member or two `.lp` members are one error line each.
+#[test]
+fn rti_zips_read_and_their_mistakes_are_named() {
+    let dir = temp();
+    let png =
+        io::picture::encode(&Array3::from_elem((3, 4, 4), 0.2), ImageFormat::Png, "x").unwrap();
+    let lp = b"2\na.png 0 0 1\nb.png 0.6 0 0.8\n".to_vec();
+    let member = |name: &str, bytes: &[u8]| (name.to_string(), bytes.to_vec());
+    let good = dir.path().join("good.zip");
+    write_zip(
+        &good,
+        &[
+            member("set/a.png", &png),
+            member("set/b.png", &png),
+            member("set/dirs.lp", &lp),
+        ],
+    );
+    let info: serde_json::Value = serde_json::from_str(&ok(&["info", s(&good), "--json"])).unwrap();
+    assert_eq!(
+        (info["views"].clone(), info["lights"].clone()),
+        (1.into(), 2.into())
+    );
+    let missing = dir.path().join("missing.zip");
+    write_zip(&missing, &[member("a.png", &png), member("dirs.lp", &lp)]);
+    let err = fails(&["info", s(&missing)]);
+    assert!(err.contains("dirs.lp") && err.contains("'b.png'"), "{err}");
+    let two = dir.path().join("two.zip");
+    write_zip(
+        &two,
+        &[
+            member("a.png", &png),
+            member("x.lp", &lp),
+            member("y.lp", &lp),
+        ],
+    );
+    let err = fails(&["info", s(&two)]);
+    assert!(err.contains("several .lp members"), "{err}");
+}
+
 #[test]
 fn unreadable_paths_and_bad_sizes() {
     let err = fails(&["info", "/nonexistent/btf.zip"]);

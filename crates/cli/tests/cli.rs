@@ -154,14 +154,130 @@ fn convert_between_zip_folder_exr_and_png() {
         assert_eq!(na, nb);
         assert_eq!(decode(ba), decode(bb), "{na}");
     }
-    // The RTI set's light angles are not whole degrees: the UBO2003 names cannot hold them.
-    let err = fails(&[
-        "convert",
-        &rti("clay-leaf"),
+}
+
+/// The light directions of a BTF or model as `info --json` reports them, (theta, phi) in
+/// degrees.
+fn lights_of(btf: &str) -> Vec<(f64, f64)> {
+    let info: serde_json::Value = serde_json::from_str(&ok(&["info", btf, "--json"])).unwrap();
+    assert_eq!(info["views"], 1, "{info}");
+    info["light_directions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| {
+            (
+                d["theta_deg"].as_f64().unwrap(),
+                d["phi_deg"].as_f64().unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// Light directions equal to within `tol` degrees, in order.
+fn assert_same_lights(a: &[(f64, f64)], b: &[(f64, f64)], tol: f64) {
+    assert_eq!(a.len(), b.len());
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        assert!(
+            (x.0 - y.0).abs() <= tol && (x.1 - y.1).abs() <= tol,
+            "light {i}: {x:?} vs {y:?}"
+        );
+    }
+}
+
+/// Issue 13 item 7: an RTI set, whose light angles are not whole degrees, is written as an
+/// RTI capture (images and dirs.lp with the exact light vectors), zipped or as a folder, and
+/// our reader opens both with the same lights and pixels.
+#[test]
+fn an_rti_set_converts_to_an_rti_zip_and_folder_and_reads_back() {
+    use btfmrf::btf::Btf;
+    let dir = temp();
+    let set = rti("clay-leaf");
+    let lights = lights_of(&set);
+    assert!(lights.iter().any(|l| (l.0 - l.0.round()).abs() > 0.01));
+    let original = Btf::open(&set).unwrap();
+    for out in ["r.zip", "r-folder"] {
+        let out = dir.path().join(out);
+        ok(&[
+            "convert",
+            &set,
+            "--out",
+            s(&out),
+            "--format",
+            "png",
+            "--quiet",
+        ]);
+        if out.is_dir() {
+            let names = entries(&out);
+            assert_eq!(names.len(), 49, "{names:?}");
+            assert!(
+                names.contains(&"dirs.lp".to_string()) && names.contains(&"047.png".to_string())
+            );
+        } else {
+            let members = read_zip(&out);
+            assert_eq!(members.len(), 49);
+            assert_eq!(members.last().unwrap().0, "dirs.lp");
+        }
+        assert_same_lights(&lights_of(s(&out)), &lights, 1e-9);
+        let back = Btf::open(&out).unwrap();
+        assert_eq!((back.width(), back.height()), (310, 310));
+        // JPEG decoded to linear and re-encoded as 8-bit PNG: the same 8-bit values.
+        for l in [0, 17, 47] {
+            let (a, b) = (original.image(0, l).unwrap(), back.image(0, l).unwrap());
+            let worst = a
+                .iter()
+                .zip(b.iter())
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max);
+            assert!(worst < 1e-6, "light {l}: pixels differ by {worst}");
+        }
+    }
+    // A whole-degree BTF keeps its UBO2003 names.
+    let zip = tiny_btf(&dir.path().join("a.zip"), 8, btfmrf::btf::ImageFormat::Png);
+    let again = dir.path().join("again.zip");
+    ok(&["convert", s(&zip), "--out", s(&again), "--format", "png"]);
+    let names: Vec<String> = read_zip(&again).into_iter().map(|m| m.0).collect();
+    assert_eq!(names.len(), 6561);
+    assert!(names[0].contains("tl000") && !names.iter().any(|n| n.ends_with(".lp")));
+}
+
+/// Issue 13 item 7: a model of an RTI set synthesizes the whole BTF (every measured light,
+/// no --light) as an RTI zip that reads back with the model's lights.
+#[test]
+fn a_model_of_an_rti_set_synthesizes_a_whole_rti_zip() {
+    let dir = temp();
+    let set = rti("clay-leaf");
+    let model = dir.path().join("leaf.btfm");
+    ok(&[
+        "analyze",
+        &set,
+        "--clusters",
+        "4",
         "--out",
-        s(&dir.path().join("r.zip")),
+        s(&model),
+        "--quiet",
     ]);
-    assert!(err.contains("whole degrees"), "{err}");
+    let out = dir.path().join("leaf.zip");
+    let report: serde_json::Value = serde_json::from_str(&ok(&[
+        "synthesize",
+        s(&model),
+        "--size",
+        "32",
+        "--out",
+        s(&out),
+        "--json",
+    ]))
+    .unwrap();
+    assert_eq!(report["images"], 48, "{report}");
+    // The model stores its directions in single precision: exactly those come back.
+    let written = lights_of(s(&out));
+    assert_same_lights(&written, &lights_of(s(&model)), 1e-9);
+    assert_same_lights(&written, &lights_of(&set), 1e-4);
+    let info: serde_json::Value = serde_json::from_str(&ok(&["info", s(&out), "--json"])).unwrap();
+    assert_eq!(
+        (info["width"].clone(), info["height"].clone()),
+        (32.into(), 32.into())
+    );
 }
 
 #[test]
@@ -243,5 +359,28 @@ fn analyze_warns_when_the_input_is_not_a_stationary_texture() {
     assert!(
         report["warnings"].as_array().unwrap().is_empty(),
         "{report}"
+    );
+}
+
+/// `info` on a model file describes the model (its kind told by the first bytes).
+#[test]
+fn info_describes_a_model_file() {
+    let model = repo().join("models/stones.btfm");
+    let info: serde_json::Value =
+        serde_json::from_str(&ok(&["info", s(&model), "--json"])).unwrap();
+    assert_eq!(info["format"], "btfm", "{info}");
+    assert_eq!(info["model"], "2dcar");
+    assert_eq!(
+        (info["views"].clone(), info["lights"].clone()),
+        (81.into(), 81.into())
+    );
+    assert_eq!(
+        (info["width"].clone(), info["height"].clone()),
+        (128.into(), 128.into())
+    );
+    let text = ok(&["info", s(&model)]);
+    assert!(
+        text.contains("2dcar model (.btfm)") && text.contains("lights: 81"),
+        "{text}"
     );
 }

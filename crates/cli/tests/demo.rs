@@ -36,6 +36,13 @@ fn demo_writes_the_report_with_its_images_models_and_benchmark() {
         "sphere and cloth x bump and displacement x 3 lights, and the LPCA sphere x 3 lights"
     );
     assert!(md.contains("| sphere | lpca |"), "{md}");
+    // The benchmark's report is embedded one level down, without its own title.
+    assert!(
+        md.contains("## Speed against error\n\n81 views x 81 lights"),
+        "{md}"
+    );
+    assert!(!md.contains("# Speed against error:"), "{md}");
+    assert!(md.contains("(8 clusters x 4 components, tiled)"), "{md}");
     for link in &links {
         let path = out.join(link);
         assert!(path.exists(), "{link} is linked but missing");

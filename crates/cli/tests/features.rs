@@ -227,3 +227,25 @@ fn a_tinted_grey_photograph_relit_by_another_illuminant_is_matched_to_itself() {
         }
     }
 }
+
+/// `recognize` has no default data folder outside the repository: without --data or
+/// BTFMRF_DATA it stops with one line saying what to give; a missing folder is named.
+#[test]
+fn recognize_needs_a_data_folder() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_btfmrf"))
+        .arg("recognize")
+        .env_remove("BTFMRF_DATA")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("error: recognize needs a data folder: --data DIR (or BTFMRF_DATA=DIR)"),
+        "{stderr}"
+    );
+    let dir = temp();
+    let missing = dir.path().join("nowhere");
+    let e = fails(&["recognize", "--data", s(&missing)]);
+    assert!(e.contains("nowhere: not a folder"), "{e}");
+}

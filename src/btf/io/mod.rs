@@ -3,6 +3,7 @@
 //! written atomically through [`crate::io`] (temporary name, then rename), so that no
 //! half-written output is ever left as if complete.
 
+mod export;
 mod photo;
 pub mod picture;
 pub mod rti;
@@ -21,6 +22,7 @@ use super::error::{BtfError, Result};
 
 pub use self::picture::ImageFormat;
 use crate::io::{parent_dir, write_file_atomic};
+pub use export::write_btf;
 pub use ubo2003::write_ubo2003;
 
 /// The largest file this library reads into memory at once (an image or a `.lp` file).
@@ -30,8 +32,9 @@ pub const MAX_FILE_BYTES: u64 = 1 << 30;
 /// (a larger file grows the buffer as real bytes arrive).
 const MAX_RESERVE: u64 = 64 << 20;
 
-/// Opens a BTF: a zip archive, a UBO2003 folder, an RTI folder, an RTI `.lp` file, or a
-/// photograph (a PNG/JPEG/EXR file, or a folder holding one): see [`photo`].
+/// Opens a BTF: a zip archive (UBO2003, or RTI with a `.lp` member), a UBO2003 folder, an RTI
+/// folder, an RTI `.lp` file, or a photograph (a PNG/JPEG/EXR file, or a folder holding one):
+/// see [`photo`].
 pub(crate) fn open(path: &Path) -> Result<Btf> {
     let meta = std::fs::metadata(path).map_err(|e| BtfError::io(path, e))?;
     if meta.is_dir() {
@@ -60,6 +63,9 @@ pub(crate) fn open(path: &Path) -> Result<Btf> {
         ),
         other => other,
     })?;
+    if let Some(lp) = rti::find_lp_member(&zip)? {
+        return rti::open_zip(zip, &lp);
+    }
     ubo2003::open(zip)
 }
 

@@ -7,15 +7,20 @@
 //! y up in the image, z out of the surface). Real files are untidy; we trust the lines over the
 //! count, normalise the vectors, keep grazing lights (z <= 0), skip blank lines and trailing
 //! spaces, and report every deviation as a warning.
+//!
+//! A capture is read from a folder or from a zip archive holding the `.lp` file, and written
+//! back ([`write_rti`]) when its light directions are not in whole degrees, which the UBO2003
+//! names need.
 
 use std::path::{Path, PathBuf};
 
 use ndarray::Array3;
 
-use super::Container;
+use super::{Container, ImageFormat};
 use crate::btf::dataset::{Btf, ImageSource};
 use crate::btf::directions::{Direction, DirectionSet};
 use crate::btf::error::{BtfError, Result};
+use crate::progress::Progress;
 
 /// One parsed `.lp` file.
 #[derive(Debug, Clone, PartialEq)]
@@ -166,10 +171,8 @@ pub(crate) fn open(lp_path: &Path) -> Result<Btf> {
             .unwrap_or_default(),
         None,
     )?;
-    let text = String::from_utf8_lossy(&bytes);
-    let lp = parse_lp(&text, lp_path)?;
+    let lp = parse_lp(&String::from_utf8_lossy(&bytes), lp_path)?;
     let root = crate::io::parent_dir(lp_path);
-    let container = Container::dir(root);
     for name in &lp.images {
         let p = root.join(name);
         if !p.is_file() {
@@ -178,6 +181,57 @@ pub(crate) fn open(lp_path: &Path) -> Result<Btf> {
                 format!("lists image '{name}', but {} does not exist", p.display()),
             ));
         }
+    }
+    from_parts(Container::dir(root), lp, lp_path.display().to_string())
+}
+
+/// The `.lp` member of a zip archive: `dirs.lp` if present, else the only `*.lp` member;
+/// `None` when there is none (a UBO2003 archive).
+pub(crate) fn find_lp_member(zip: &Container) -> Result<Option<String>> {
+    let mut found: Vec<String> = zip
+        .names()?
+        .into_iter()
+        .filter(|n| n.to_ascii_lowercase().ends_with(".lp"))
+        .collect();
+    if let Some(k) = found.iter().position(|n| n == LP_NAME) {
+        return Ok(Some(found.swap_remove(k)));
+    }
+    match found.len() {
+        0 | 1 => Ok(found.pop()),
+        _ => Err(BtfError::layout(
+            zip.location(),
+            "several .lp members; keep one",
+        )),
+    }
+}
+
+/// Opens an RTI capture held in a zip archive whose `.lp` member is `lp_name`; image names
+/// are relative to that member's folder in the archive.
+pub(crate) fn open_zip(zip: Container, lp_name: &str) -> Result<Btf> {
+    let label = zip.describe(lp_name);
+    let mut lp = parse_lp(
+        &String::from_utf8_lossy(&zip.read(lp_name, None)?),
+        Path::new(&label),
+    )?;
+    let folder = lp_name.rsplit_once('/').map_or("", |(dir, _)| dir);
+    let members: std::collections::HashSet<String> = zip.names()?.into_iter().collect();
+    for name in &mut lp.images {
+        if !folder.is_empty() {
+            *name = format!("{folder}/{name}");
+        }
+        if !members.contains(name.as_str()) {
+            return Err(BtfError::layout(
+                &label,
+                format!("lists image '{name}', which the archive does not hold"),
+            ));
+        }
+    }
+    from_parts(zip, lp, label)
+}
+
+/// The BTF of a parsed `.lp` file whose images `container` holds.
+fn from_parts(container: Container, lp: LightPositions, label: String) -> Result<Btf> {
+    for name in &lp.images {
         container.check_inside(name)?;
     }
     let (width, height) = super::ubo2003::common_size(&container, &lp.images)?;
@@ -192,7 +246,7 @@ pub(crate) fn open(lp_path: &Path) -> Result<Btf> {
         images: lp.images,
     };
     let btf = Btf::from_source(
-        lp_path.display().to_string(),
+        label,
         DirectionSet::zenith(),
         lights,
         width,
@@ -200,6 +254,64 @@ pub(crate) fn open(lp_path: &Path) -> Result<Btf> {
         Box::new(source),
     )?;
     Ok(btf.with_warnings(lp.warnings))
+}
+
+/// The light file's name in the RTI captures this library writes.
+pub const LP_NAME: &str = "dirs.lp";
+
+/// Whether `btf` fits the RTI layout: one view, at the zenith (the reader assumes it).
+pub fn is_fixed_view(btf: &Btf) -> bool {
+    btf.views().len() == 1 && btf.views().as_slice()[0].theta_deg.abs() < 1e-9
+}
+
+/// The text of a `.lp` file for `images` lit from `lights`: the count, then one line
+/// `name lx ly lz` per image with the unit vector towards the light, each coordinate in the
+/// shortest decimal that reads back as the same `f64`.
+pub fn format_lp(images: &[String], lights: &DirectionSet) -> String {
+    let mut text = format!("{}\n", images.len());
+    for (name, d) in images.iter().zip(lights.iter()) {
+        let [x, y, z] = d.vector();
+        text.push_str(&format!("{name} {x:?} {y:?} {z:?}\n"));
+    }
+    text
+}
+
+/// Writes a fixed-view BTF as an RTI capture readable by [`open`]: images `000.png`,
+/// `001.png`, ... (in light order, in `format`) and [`LP_NAME`] with the exact light
+/// vectors, as a zip archive when `out` ends in `.zip`, otherwise as a new folder. For light
+/// directions that are not in whole degrees, which the UBO2003 names cannot hold.
+///
+/// # Errors
+/// More than one view or a view off the zenith, unreadable source images, an existing output
+/// folder, or an unwritable destination.
+pub fn write_rti(
+    btf: &Btf,
+    out: &Path,
+    format: ImageFormat,
+    progress: &dyn Progress,
+) -> Result<()> {
+    if !is_fixed_view(btf) {
+        return Err(BtfError::parameter(
+            "directions",
+            format!(
+                "an RTI capture holds one view at the zenith; this BTF has {} view(s)",
+                btf.views().len()
+            ),
+        ));
+    }
+    let digits = (btf.lights().len().max(1) - 1).to_string().len().max(3);
+    let names: Vec<String> = (0..btf.lights().len())
+        .map(|i| format!("{i:0digits$}.{}", format.extension()))
+        .collect();
+    let lp = format_lp(&names, btf.lights());
+    super::ubo2003::write_images(
+        btf,
+        out,
+        &names,
+        Some((LP_NAME, lp.as_bytes())),
+        format,
+        progress,
+    )
 }
 
 #[cfg(test)]

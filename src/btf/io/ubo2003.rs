@@ -343,15 +343,37 @@ pub fn write_ubo2003(
     progress: &dyn Progress,
 ) -> Result<()> {
     let names = output_names(btf, format)?;
+    write_images(btf, out, &names, None, format, progress)
+}
+
+/// Whether every direction of `btf` is in whole degrees, so that [`write_ubo2003`] can name
+/// its images.
+pub(crate) fn has_whole_degrees(btf: &Btf) -> bool {
+    let whole = |set: &crate::btf::DirectionSet| set.iter().all(|d| whole_degrees(d, "").is_ok());
+    whole(btf.views()) && whole(btf.lights())
+}
+
+/// Writes every image of `btf` (view-major) under `names`, and `extra` (a name and its bytes,
+/// e.g. an RTI `.lp` file) after them: a zip archive when `out` ends in `.zip` (members
+/// stored uncompressed, as JPEG/PNG/EXR do not deflate further), otherwise a new folder. The
+/// output appears under its final name only when complete.
+pub(crate) fn write_images(
+    btf: &Btf,
+    out: &Path,
+    names: &[String],
+    extra: Option<(&str, &[u8])>,
+    format: ImageFormat,
+    progress: &dyn Progress,
+) -> Result<()> {
     let lights = btf.lights().len();
     let is_zip = out
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("zip"));
     progress.start("writing images", names.len() as u64);
     let result = if is_zip {
-        write_zip(btf, out, &names, lights, format, progress)
+        write_zip(btf, out, names, extra, lights, format, progress)
     } else {
-        write_folder(btf, out, &names, lights, format, progress)
+        write_folder(btf, out, names, extra, lights, format, progress)
     };
     progress.finish();
     result
@@ -388,6 +410,7 @@ fn write_zip(
     btf: &Btf,
     out: &Path,
     names: &[String],
+    extra: Option<(&str, &[u8])>,
     lights: usize,
     format: ImageFormat,
     progress: &dyn Progress,
@@ -403,6 +426,10 @@ fn write_zip(
         zip.start_file(name, options).map_err(zip_err)?;
         zip.write_all(bytes).map_err(io_err)
     })?;
+    if let Some((name, bytes)) = extra {
+        zip.start_file(name, options).map_err(zip_err)?;
+        zip.write_all(bytes).map_err(io_err)?;
+    }
     let mut buffered = zip.finish().map_err(zip_err)?;
     buffered.flush().map_err(io_err)?;
     let mut tmp = buffered.into_inner().map_err(|e| io_err(e.into_error()))?;
@@ -416,6 +443,7 @@ fn write_folder(
     btf: &Btf,
     out: &Path,
     names: &[String],
+    extra: Option<(&str, &[u8])>,
     lights: usize,
     format: ImageFormat,
     progress: &dyn Progress,
@@ -425,6 +453,10 @@ fn write_folder(
         let path = tmp.path().join(name);
         std::fs::write(&path, bytes).map_err(|e| BtfError::io(&path, e))
     })?;
+    if let Some((name, bytes)) = extra {
+        let path = tmp.path().join(name);
+        std::fs::write(&path, bytes).map_err(|e| BtfError::io(&path, e))?;
+    }
     Ok(crate::io::publish_dir(tmp, out)?)
 }
 
