@@ -205,7 +205,7 @@ pub fn bench_mrf(
     let result = MethodResult {
         name: kind.name().to_string(),
         parameters: serde_json::json!({
-            "clusters": model.subspaces.len(),
+            "clusters": model.subspaces().len(),
             "levels": model.levels(),
         }),
         analysis_seconds,

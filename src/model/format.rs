@@ -3,15 +3,12 @@
 
 use std::path::Path;
 
-use super::material::{
-    BandMarginals, BandModel, LevelModel, MaterialModel, ModelKind, RangeMap, SubspaceModel,
-};
+use super::material::{BandMarginals, MaterialModel, MaterialParts, RangeMap, SubspaceModel};
 use super::{ModelError, Result};
 use crate::btf::{Direction, DirectionSet, io};
 use crate::decompose::marginals::{BAND_QUANTILES, QUANTILES, QuantileGrid};
 use crate::decompose::{ColourSpace, KlBasis};
-use crate::mrf::neighbourhood::{MAX_ORDER, causal};
-use crate::mrf::{Car2dModel, Car3dModel, GmrfModel, car3d::MAX_ORDER_3D};
+use crate::mrf::{AnyLevels, BandModel, KindVisitor, Levels, LevelsVisitor, ModelKind};
 
 /// The four bytes every model file starts with.
 pub const MAGIC: [u8; 4] = *b"BTFM";
@@ -23,33 +20,43 @@ pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
 pub const MAX_LEVELS: u8 = 16;
 
-struct Writer(Vec<u8>);
+/// Appends little-endian values to a model file payload (band model records use it, see
+/// [`crate::mrf::BandModel::write`]).
+#[derive(Debug, Default)]
+pub struct Writer(Vec<u8>);
 
 impl Writer {
-    fn u8(&mut self, v: u8) {
+    /// Appends a byte.
+    pub fn u8(&mut self, v: u8) {
         self.0.push(v);
     }
-    fn u16(&mut self, v: u16) {
+    /// Appends a little-endian `u16`.
+    pub fn u16(&mut self, v: u16) {
         self.0.extend_from_slice(&v.to_le_bytes());
     }
-    fn u32(&mut self, v: u32) {
+    /// Appends a little-endian `u32`.
+    pub fn u32(&mut self, v: u32) {
         self.0.extend_from_slice(&v.to_le_bytes());
     }
-    fn f32(&mut self, v: f64) {
+    /// Appends `v` in single precision.
+    pub fn f32(&mut self, v: f64) {
         self.0.extend_from_slice(&(v as f32).to_le_bytes());
     }
-    fn f32s(&mut self, v: &[f64]) {
+    /// Appends every value in single precision.
+    pub fn f32s(&mut self, v: &[f64]) {
         v.iter().for_each(|&x| self.f32(x));
     }
 }
 
 /// Reads from a byte slice; every read checks the remaining length first.
-struct Reader<'a> {
+#[derive(Debug)]
+pub struct Reader<'a> {
     bytes: &'a [u8],
     pos: usize,
 }
 
-type Parse<T> = std::result::Result<T, String>;
+/// A parse result; the error says what is wrong and where.
+pub type Parse<T> = std::result::Result<T, String>;
 
 impl<'a> Reader<'a> {
     fn take(&mut self, n: usize) -> Parse<&'a [u8]> {
@@ -60,20 +67,24 @@ impl<'a> Reader<'a> {
         self.pos += n;
         Ok(s)
     }
-    fn u8(&mut self) -> Parse<u8> {
+    /// The next byte.
+    pub fn u8(&mut self) -> Parse<u8> {
         Ok(self.take(1)?[0])
     }
-    fn u16(&mut self) -> Parse<u16> {
+    /// The next little-endian `u16`.
+    pub fn u16(&mut self) -> Parse<u16> {
         Ok(u16::from_le_bytes(
             self.take(2)?.try_into().expect("2 bytes"),
         ))
     }
-    fn u32(&mut self) -> Parse<u32> {
+    /// The next little-endian `u32`.
+    pub fn u32(&mut self) -> Parse<u32> {
         Ok(u32::from_le_bytes(
             self.take(4)?.try_into().expect("4 bytes"),
         ))
     }
-    fn f32(&mut self) -> Parse<f64> {
+    /// The next single-precision value, which must be finite.
+    pub fn f32(&mut self) -> Parse<f64> {
         let v = f32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes"));
         if v.is_finite() {
             Ok(f64::from(v))
@@ -82,11 +93,12 @@ impl<'a> Reader<'a> {
         }
     }
     /// `n` floats, after checking they fit in what is left (no allocation from a bad count).
-    fn f32s(&mut self, n: usize) -> Parse<Vec<f64>> {
+    pub fn f32s(&mut self, n: usize) -> Parse<Vec<f64>> {
         self.ensure(n, 4)?;
         (0..n).map(|_| self.f32()).collect()
     }
-    fn ensure(&self, count: usize, size: usize) -> Parse<()> {
+    /// Checks that `count` items of `size` bytes fit in what is left.
+    pub fn ensure(&self, count: usize, size: usize) -> Parse<()> {
         match count.checked_mul(size) {
             Some(b) if b <= self.bytes.len() - self.pos => Ok(()),
             _ => Err(format!(
@@ -95,7 +107,8 @@ impl<'a> Reader<'a> {
             )),
         }
     }
-    fn order(&mut self, max: usize) -> Parse<u8> {
+    /// A neighbourhood order of at most `max`.
+    pub fn order(&mut self, max: usize) -> Parse<u8> {
         let o = self.u8()?;
         if usize::from(o) > max {
             return Err(format!("neighbourhood order {o} exceeds {max}"));
@@ -104,35 +117,64 @@ impl<'a> Reader<'a> {
     }
 }
 
-fn kind_code(kind: ModelKind) -> u8 {
-    match kind {
-        ModelKind::Gmrf => 0,
-        ModelKind::Car2d => 1,
-        ModelKind::Car3d => 2,
+/// Writes every level's band model records, finest level first.
+struct WriteLevels<'a>(&'a mut Writer);
+
+impl LevelsVisitor for WriteLevels<'_> {
+    type Output = ();
+    fn visit<M: BandModel>(self, levels: &Levels<M>) {
+        levels
+            .levels()
+            .iter()
+            .flatten()
+            .for_each(|m| m.write(self.0));
+    }
+}
+
+/// Reads `levels` levels of band model records of one family.
+struct ReadLevels<'r, 'a> {
+    reader: &'r mut Reader<'a>,
+    levels: usize,
+}
+
+impl KindVisitor for ReadLevels<'_, '_> {
+    type Output = Parse<AnyLevels>;
+    fn visit<M: BandModel>(self) -> Parse<AnyLevels>
+    where
+        Levels<M>: Into<AnyLevels>,
+    {
+        let levels = (0..self.levels)
+            .map(|_| {
+                (0..Levels::<M>::PER_LEVEL)
+                    .map(|_| M::read(self.reader))
+                    .collect()
+            })
+            .collect::<Parse<Vec<Vec<M>>>>()?;
+        Ok(Levels::new(levels).ok_or("no pyramid levels")?.into())
     }
 }
 
 /// Serialises a model to bytes (header, payload, CRC-32 of the payload).
 pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
     let mut w = Writer(Vec::new());
-    w.u8(kind_code(model.kind));
-    w.u32(model.width);
-    w.u32(model.height);
+    w.u8(model.kind().code());
+    w.u32(model.width());
+    w.u32(model.height());
     w.u8(model.levels() as u8);
-    for set in [&model.views, &model.lights] {
+    for set in [model.views(), model.lights()] {
         w.u16(set.len() as u16);
         for d in set {
             w.f32(d.theta_deg);
             w.f32(d.phi_deg);
         }
     }
-    w.u16(model.subspaces.len() as u16);
-    let wide = model.subspaces.len() > 256;
+    w.u16(model.subspaces().len() as u16);
+    let wide = model.subspaces().len() > 256;
     w.u8(if wide { 2 } else { 1 });
-    for &c in &model.cluster_table {
+    for &c in model.cluster_table() {
         if wide { w.u16(c) } else { w.u8(c as u8) }
     }
-    for s in &model.subspaces {
+    for s in model.subspaces() {
         w.u16(s.representative.0);
         w.u16(s.representative.1);
         w.f32s(&s.kl.mean);
@@ -142,30 +184,9 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
         for q in &s.marginals {
             w.f32s(q);
         }
-        for level in &s.levels {
-            match level {
-                LevelModel::Factors(bands) => {
-                    for band in bands {
-                        match band {
-                            BandModel::Car2d(m) => {
-                                write_band(&mut w, m.order, m.mean, m.sigma2, &m.gamma)
-                            }
-                            BandModel::Gmrf(m) => {
-                                write_band(&mut w, m.order, m.mean, m.sigma2, &m.gamma)
-                            }
-                        }
-                    }
-                }
-                LevelModel::Joint(m) => {
-                    w.u8(m.order);
-                    w.f32s(&m.mean);
-                    w.f32s(&m.sigma);
-                    w.f32s(&m.a);
-                }
-            }
-        }
+        s.levels.visit(WriteLevels(&mut w));
     }
-    match &model.range_map {
+    match model.range_map() {
         None => w.u8(0),
         Some(r) => {
             w.u8(if r.strength.is_empty() { 1 } else { 2 });
@@ -210,7 +231,7 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
 /// The version 2 tail: the colour space, then the band quantile tables if any.
 fn write_colour(w: &mut Writer, model: &MaterialModel) {
     let space = model
-        .subspaces
+        .subspaces()
         .first()
         .map_or(ColourSpace::Lab, |s| s.kl.space);
     w.u8(match space {
@@ -218,16 +239,16 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
         ColourSpace::Lab => 1,
     });
     let grid = model
-        .subspaces
+        .subspaces()
         .first()
         .map_or(QuantileGrid::NormalTails, |s| s.marginal_grid);
     w.u8(match grid {
         QuantileGrid::Uniform => 0,
         QuantileGrid::NormalTails => 1,
     });
-    let with_bands = model.subspaces.iter().all(|s| s.band_marginals.is_some());
+    let with_bands = model.subspaces().iter().all(|s| s.band_marginals.is_some());
     w.u8(if with_bands { BAND_QUANTILES as u8 } else { 0 });
-    for s in model.subspaces.iter().filter(|_| with_bands) {
+    for s in model.subspaces().iter().filter(|_| with_bands) {
         for table in s
             .band_marginals
             .iter()
@@ -241,7 +262,7 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
 /// Bytes the band quantile tables take in the file (0 without them).
 pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
     let tables: usize = model
-        .subspaces
+        .subspaces()
         .iter()
         .filter_map(|s| s.band_marginals.as_ref())
         .map(|b| 3 * b.tables.len())
@@ -269,13 +290,6 @@ fn write_quantised(w: &mut Writer, values: &[f64]) {
     }
 }
 
-fn write_band(w: &mut Writer, order: u8, mean: f64, sigma2: f64, gamma: &[f64]) {
-    w.u8(order);
-    w.f32(mean);
-    w.f32(sigma2);
-    w.f32s(gamma);
-}
-
 /// Parses a model from bytes; `path` is only used in messages.
 ///
 /// # Errors
@@ -296,12 +310,8 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         bytes: payload,
         pos: 0,
     };
-    let kind = match r.u8()? {
-        0 => ModelKind::Gmrf,
-        1 => ModelKind::Car2d,
-        2 => ModelKind::Car3d,
-        k => return Err(format!("unknown model kind {k}")),
-    };
+    let code = r.u8()?;
+    let kind = ModelKind::from_code(code).ok_or_else(|| format!("unknown model kind {code}"))?;
     let (width, height) = (r.u32()?, r.u32()?);
     if width == 0
         || height == 0
@@ -378,49 +388,10 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             }
             table.copy_from_slice(&q);
         }
-        let mut level_models = Vec::with_capacity(usize::from(levels));
-        for _ in 0..levels {
-            level_models.push(match kind {
-                ModelKind::Car3d => {
-                    let order = r.order(MAX_ORDER_3D)?;
-                    let mean: [f64; 3] = r.f32s(3)?.try_into().expect("3");
-                    let sigma: [f64; 9] = r.f32s(9)?.try_into().expect("9");
-                    let a = r.f32s(9 * causal(usize::from(order)).len())?;
-                    LevelModel::Joint(Car3dModel {
-                        order,
-                        a,
-                        sigma,
-                        mean,
-                    })
-                }
-                _ => {
-                    let band = |r: &mut Reader| -> Parse<BandModel> {
-                        let order = r.order(MAX_ORDER)?;
-                        let (mean, sigma2) = (r.f32()?, r.f32()?);
-                        if sigma2 < 0.0 {
-                            return Err(format!("negative noise variance {sigma2}"));
-                        }
-                        let gamma = r.f32s(causal(usize::from(order)).len())?;
-                        Ok(if kind == ModelKind::Gmrf {
-                            BandModel::Gmrf(GmrfModel {
-                                order,
-                                gamma,
-                                sigma2,
-                                mean,
-                            })
-                        } else {
-                            BandModel::Car2d(Car2dModel {
-                                order,
-                                gamma,
-                                sigma2,
-                                mean,
-                            })
-                        })
-                    };
-                    LevelModel::Factors([band(&mut r)?, band(&mut r)?, band(&mut r)?])
-                }
-            });
-        }
+        let level_models = kind.visit(ReadLevels {
+            reader: &mut r,
+            levels: usize::from(levels),
+        })?;
         subspaces.push(SubspaceModel {
             representative,
             kl,
@@ -475,8 +446,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             payload.len() - r.pos
         ));
     }
-    Ok(MaterialModel {
-        kind,
+    MaterialModel::new(MaterialParts {
         views,
         lights,
         width,
@@ -485,6 +455,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         subspaces,
         range_map,
     })
+    .map_err(|e| e.to_string())
 }
 
 /// Reads the version 2 tail (see [`write_colour`]) into the subspace models.

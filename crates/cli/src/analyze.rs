@@ -99,14 +99,14 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let ratio = btf.raw_bytes() as f64 / model_bytes as f64;
     if args.json {
         emit(serde_json::json!({
-            "model": model.kind.name(),
+            "model": model.kind().name(),
             "analysis_seconds": seconds,
             "model_bytes": model_bytes,
             "raw_bytes": btf.raw_bytes(),
             "compression_ratio": ratio,
-            "clusters": model.subspaces.len(),
+            "clusters": model.subspaces().len(),
             "levels": model.levels(),
-            "range_map": model.range_map.as_ref().map(|r| serde_json::json!({"rows": r.rows, "cols": r.cols, "step": r.step})),
+            "range_map": model.range_map().map(|r| serde_json::json!({"rows": r.rows, "cols": r.cols, "step": r.step})),
             "band_marginal_bytes": format::band_marginal_bytes(&model),
             "repairs": report.repairs,
             "warnings": report.warnings,
@@ -122,8 +122,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         emit(format!(
             "wrote {} ({} model, {} subspaces, {} levels): {} for {} raw, 1:{:.0}, in {:.2} s",
             args.out.display(),
-            model.kind,
-            model.subspaces.len(),
+            model.kind(),
+            model.subspaces().len(),
             model.levels(),
             human_bytes(model_bytes),
             human_bytes(btf.raw_bytes()),

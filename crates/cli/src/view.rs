@@ -80,7 +80,7 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
         ViewerOptions {
             width: cols as u32,
             height: rows as u32,
-            texture_size: n.max(1 << model.levels().max(1).saturating_sub(1)),
+            texture_size: n.max(model.min_synthesis_side()),
             seed: args.seed,
             meshes,
             mapping: args.mapping,

@@ -367,8 +367,8 @@ impl Renderer {
         }
         let start = Instant::now();
         let luts = (
-            DirectionLut::new(&model.views)?,
-            DirectionLut::new(&model.lights)?,
+            DirectionLut::new(model.views())?,
+            DirectionLut::new(model.lights())?,
         );
         let min_side = model.min_synthesis_side().max(32);
         let tile = options.tile;
@@ -438,8 +438,8 @@ impl Renderer {
         check_size(scene.width, scene.height)?;
         let start = Instant::now();
         let luts = (
-            DirectionLut::new(&model.views)?,
-            DirectionLut::new(&model.lights)?,
+            DirectionLut::new(model.views())?,
+            DirectionLut::new(model.lights())?,
         );
         let size = cache.options().rows;
         if cache.options().cols != size {
@@ -506,7 +506,7 @@ impl Renderer {
             texels_synthesized: (synthesized * rows * cols) as u64,
             plan,
             tile: rows,
-            subspaces_total: model.subspaces.len(),
+            subspaces_total: model.subspaces().len(),
             synthesis_seconds,
             render_seconds,
             adapter: self.ctx.describe(),

@@ -147,7 +147,7 @@ impl App<'_> {
         surface.configure(&ctx.device, &config);
         let pipelines = Pipelines::new(&ctx, format)?;
         let model = self.model;
-        let all: Vec<usize> = (0..model.subspaces.len()).collect();
+        let all: Vec<usize> = (0..model.subspaces().len()).collect();
         let n = o.texture_size;
         let cache = model.synthesis_cache_for(
             &all,
