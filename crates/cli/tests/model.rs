@@ -239,10 +239,11 @@ fn cli_analyze_and_synthesize() {
 fn real_rti_sets_analyze_and_synthesize() {
     // (set, kind, file size in KB, fidelity score) as quoted.
     let quoted = [
-        ("loewenkopf", ModelKind::Gmrf, 12.7, 1.48),
-        ("clay-leaf", ModelKind::Car2d, 30.3, 0.56),
-        ("loewenkopf", ModelKind::Car3d, 14.7, 1.17),
+        ("loewenkopf", ModelKind::Gmrf, 13.3, 1.27),
+        ("clay-leaf", ModelKind::Car2d, 29.9, 0.84),
+        ("loewenkopf", ModelKind::Car3d, 15.5, 0.94),
     ];
+    let mut misses = Vec::new();
     for (set, kind, kb, score) in quoted {
         let btf = Btf::open(rti(set)).unwrap();
         let options = AnalysisOptions {
@@ -271,16 +272,14 @@ fn real_rti_sets_analyze_and_synthesize() {
         // neighbourhood choice moves the size by tens of bytes, and floating-point summation
         // order the score in its third decimal.
         let size_kb = bytes.len() as f64 / 1024.0;
-        assert!(
-            (size_kb - kb).abs() <= 0.3,
-            "{set} {kind}: {size_kb:.2} KB, docs quote {kb} KB"
-        );
-        assert!(
-            (f.score - score).abs() <= 0.03,
-            "{set} {kind}: fidelity score {:.3}, docs quote {score}",
-            f.score
-        );
+        if (size_kb - kb).abs() > 0.3 || (f.score - score).abs() > 0.03 {
+            misses.push(format!(
+                "{set} {kind}: {size_kb:.2} KB, score {:.3}; docs quote {kb} KB, {score}",
+                f.score
+            ));
+        }
     }
+    assert!(misses.is_empty(), "{misses:#?}");
 }
 
 /// Mean squared difference between horizontally adjacent pixels: across the wrap (last column
