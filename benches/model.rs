@@ -15,7 +15,7 @@ use btfmrf::analysis::{AnalysisOptions, analyze};
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction};
 use btfmrf::model::{MaterialModel, ModelKind};
-use btfmrf::mrf::{Car2dModel, GmrfModel};
+use btfmrf::mrf::{BandModel, Car2dModel, GmrfModel};
 use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
@@ -97,7 +97,7 @@ fn bench_synthesis(c: &mut Criterion) {
         });
         // Every subspace image through one cache, as `render` and `synthesize` make them: the
         // bands' driving noise is drawn once and shared.
-        let all: Vec<usize> = (0..model.subspaces.len()).collect();
+        let all: Vec<usize> = (0..model.subspaces().len()).collect();
         group.bench_function(BenchmarkId::new("all_subspaces", kind.name()), |b| {
             b.iter(|| black_box(model.synthesis_cache_for(&all, &o).expect("synthesis")))
         });
@@ -126,7 +126,7 @@ fn bench_bands(c: &mut Criterion) {
         mean: 0.0,
     };
     group.bench_function("gmrf_1024", |b| {
-        b.iter(|| black_box(gmrf.synthesize(1024, 1024, 1)))
+        b.iter(|| black_box(gmrf.synthesize(1024, 1024, 1, true)))
     });
     group.finish();
 }

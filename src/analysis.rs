@@ -12,12 +12,10 @@ use crate::decompose::stationarity::{NON_STATIONARY_SHARE, block_mean_share};
 use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceClustering};
 use crate::geometry::{self, relight};
 use crate::model::{
-    BandMarginals, BandModel, LevelModel, MaterialModel, ModelError, ModelKind, RangeMap, Result,
-    SubspaceModel,
+    AnyLevels, BandMarginals, MaterialModel, MaterialParts, ModelError, ModelKind, RangeMap,
+    Result, SubspaceModel,
 };
-use crate::mrf::{
-    Car2dModel, Car3dModel, GmrfModel, car3d::MAX_ORDER_3D, neighbourhood::MAX_ORDER,
-};
+use crate::mrf::{BandModel, KindVisitor, Levels, Repair, neighbourhood::MAX_ORDER};
 use crate::progress::Progress;
 
 /// Settings of [`analyze`].
@@ -66,10 +64,59 @@ impl Default for AnalysisOptions {
 /// What analysis did besides producing the model.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct AnalysisReport {
-    /// Every repair of an unstable or invalid band estimate, with where it happened.
-    pub repairs: Vec<String>,
+    /// Every repair of an unstable or invalid band estimate, with where it happened, and a
+    /// range map that could not be estimated.
+    pub repairs: Vec<AnalysisRepair>,
     /// Doubts about the input that do not stop the analysis (e.g. not a stationary texture).
     pub warnings: Vec<String>,
+}
+
+/// A repair analysis made. `Display` gives the message users see; it serializes as that
+/// message.
+#[derive(Debug, Clone, PartialEq)]
+pub enum AnalysisRepair {
+    /// No range map could be estimated (the reason), so the model has none.
+    NoRangeMap(String),
+    /// The repairs of one band's model estimate.
+    Band {
+        /// The subspace image.
+        subspace: usize,
+        /// The KL factor, for a model of one factor plane.
+        factor: Option<usize>,
+        /// The pyramid level, finest 0.
+        level: usize,
+        /// What was done, in order (never empty).
+        repairs: Vec<Repair>,
+    },
+}
+
+impl std::fmt::Display for AnalysisRepair {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            AnalysisRepair::NoRangeMap(reason) => write!(f, "no range map: {reason}"),
+            AnalysisRepair::Band {
+                subspace,
+                factor,
+                level,
+                repairs,
+            } => {
+                write!(f, "subspace {subspace}: ")?;
+                if let Some(factor) = factor {
+                    write!(f, "factor {factor}, ")?;
+                }
+                write!(f, "level {level}: {}", Repair::joined(repairs))
+            }
+        }
+    }
+}
+
+impl serde::Serialize for AnalysisRepair {
+    fn serialize<S: serde::Serializer>(
+        &self,
+        serializer: S,
+    ) -> std::result::Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
 }
 
 /// Fits a material model to `btf`.
@@ -125,7 +172,9 @@ pub fn analyze(
         match estimate_range_map(btf, progress) {
             Ok(map) => Some(map),
             Err(e) => {
-                report.repairs.push(format!("no range map: {e}"));
+                report
+                    .repairs
+                    .push(AnalysisRepair::NoRangeMap(e.to_string()));
                 None
             }
         }
@@ -137,7 +186,7 @@ pub fn analyze(
     let frontal = geometry::frontal_view(btf);
     let registered = range_map.as_ref().map(|m| m.registered(h, w));
     progress.start("fitting models", clustering.clusters() as u64);
-    let fitted: Vec<(SubspaceModel, Vec<String>, f64)> = clustering
+    let fitted: Vec<(SubspaceModel, Vec<AnalysisRepair>, f64)> = clustering
         .representatives
         .par_iter()
         .enumerate()
@@ -150,11 +199,20 @@ pub fn analyze(
             {
                 relight::remove_shading(&mut image, heights, light.vector(), map.strength_of(l));
             }
-            let (subspace, notes) = fit_subspace(&image, options, levels);
+            let (subspace, notes) = options.kind.visit(FitSubspace {
+                image: &image,
+                options,
+                levels,
+            });
             progress.advance(1);
             let notes = notes
                 .into_iter()
-                .map(|n| format!("subspace {k}: {n}"))
+                .map(|(factor, level, repairs)| AnalysisRepair::Band {
+                    subspace: k,
+                    factor,
+                    level,
+                    repairs,
+                })
                 .collect();
             Ok((
                 SubspaceModel {
@@ -175,8 +233,7 @@ pub fn analyze(
         shares.push(share);
     }
     report.warnings.extend(stationarity_warning(shares));
-    let model = MaterialModel {
-        kind: options.kind,
+    let model = MaterialModel::new(MaterialParts {
         views: btf.views().clone(),
         lights: btf.lights().clone(),
         width: btf.width(),
@@ -184,7 +241,7 @@ pub fn analyze(
         cluster_table: clustering.labels,
         subspaces,
         range_map,
-    };
+    })?;
     Ok((model, report))
 }
 
@@ -239,18 +296,42 @@ fn estimate_range_map(
     Ok(map)
 }
 
-/// Fits one subspace image: its colour basis (the identity for the 3D CAR, which models the
-/// channels jointly), the quantiles of its factor planes and (optionally) of its bands, its
-/// level models, and repair notes. The representative is left at (0, 0).
-fn fit_subspace(
+/// The repairs of one band: (KL factor for a one-plane model, level, repairs).
+type BandRepairs = (Option<usize>, usize, Vec<Repair>);
+
+/// Fits one subspace image with the band model of the visited kind (see [`fit_subspace`]).
+struct FitSubspace<'a> {
+    image: &'a Array3<f32>,
+    options: &'a AnalysisOptions,
+    levels: usize,
+}
+
+impl KindVisitor for FitSubspace<'_> {
+    type Output = (SubspaceModel, Vec<BandRepairs>);
+    fn visit<M: BandModel>(self) -> Self::Output
+    where
+        Levels<M>: Into<AnyLevels>,
+    {
+        fit_subspace::<M>(self.image, self.options, self.levels)
+    }
+}
+
+/// Fits one subspace image: its colour basis (the identity for a model of the three planes
+/// jointly, which needs none), the quantiles of its factor planes and (optionally) of its
+/// bands, one `M` per level and group of `M::PLANES` factor planes, and the repairs made. The
+/// representative is left at (0, 0).
+fn fit_subspace<M: BandModel>(
     image: &Array3<f32>,
     options: &AnalysisOptions,
     levels: usize,
-) -> (SubspaceModel, Vec<String>) {
-    let (kind, max_order) = (options.kind, options.max_order);
-    let kl = match kind {
-        ModelKind::Car3d => KlBasis::identity(options.colour_space),
-        ModelKind::Car2d | ModelKind::Gmrf => KlBasis::fit(image, options.colour_space),
+) -> (SubspaceModel, Vec<BandRepairs>)
+where
+    Levels<M>: Into<AnyLevels>,
+{
+    let kl = if M::PLANES == 3 {
+        KlBasis::identity(options.colour_space)
+    } else {
+        KlBasis::fit(image, options.colour_space)
     };
     let factors = kl.forward(image);
     let grid = QuantileGrid::NormalTails;
@@ -272,54 +353,38 @@ fn fit_subspace(
                 .collect(),
         }
     });
-    let (models, notes): (Vec<LevelModel>, Vec<Option<String>>) = match kind {
-        ModelKind::Car3d => (0..n_levels)
-            .into_par_iter()
-            .map(|lv| {
-                let views: Vec<_> = pyramids.iter().map(|p| p.bands[lv].view()).collect();
-                let band = stack(Axis(0), &views).expect("equal band shapes");
-                let fit = Car3dModel::fit(&band, max_order.min(MAX_ORDER_3D));
-                (
-                    LevelModel::Joint(fit.model),
-                    fit.repair.map(|r| format!("level {lv}: {r}")),
-                )
-            })
-            .unzip(),
-        ModelKind::Car2d | ModelKind::Gmrf => {
-            let fits: Vec<(BandModel, Option<String>)> = (0..3 * n_levels)
-                .into_par_iter()
-                .map(|i| {
-                    let (factor, lv) = (i / n_levels, i % n_levels);
-                    let band = &pyramids[factor].bands[lv];
-                    let (model, repair) = if kind == ModelKind::Car2d {
-                        let f = Car2dModel::fit(band, max_order);
-                        (BandModel::Car2d(f.model), f.repair)
-                    } else {
-                        let f = GmrfModel::fit(band, max_order);
-                        (BandModel::Gmrf(f.model), f.repair)
-                    };
-                    (
-                        model,
-                        repair.map(|r| format!("factor {factor}, level {lv}: {r}")),
-                    )
-                })
+    // Band i is group i / n_levels (of M::PLANES factor planes) at level i % n_levels.
+    let groups = Levels::<M>::PER_LEVEL;
+    let fits: Vec<(M, Option<BandRepairs>)> = (0..groups * n_levels)
+        .into_par_iter()
+        .map(|i| {
+            let (group, lv) = (i / n_levels, i % n_levels);
+            let planes: Vec<_> = pyramids[group * M::PLANES..(group + 1) * M::PLANES]
+                .iter()
+                .map(|p| p.bands[lv].view())
                 .collect();
-            let models = (0..n_levels)
-                .map(|lv| {
-                    let band = |factor: usize| fits[factor * n_levels + lv].0.clone();
-                    LevelModel::Factors([band(0), band(1), band(2)])
-                })
-                .collect();
-            (models, fits.into_iter().map(|f| f.1).collect())
-        }
-    };
+            let band = stack(Axis(0), &planes).expect("equal band shapes");
+            let fit = M::fit(band.view(), options.max_order);
+            let factor = (M::PLANES == 1).then_some(group);
+            let repairs = (!fit.repairs.is_empty()).then_some((factor, lv, fit.repairs));
+            (fit.model, repairs)
+        })
+        .collect();
+    let models = (0..n_levels)
+        .map(|lv| {
+            (0..groups)
+                .map(|group| fits[group * n_levels + lv].0.clone())
+                .collect()
+        })
+        .collect();
+    let levels = Levels::new(models).expect("one model per group and level");
     let subspace = SubspaceModel {
         representative: (0, 0),
         kl,
         marginals,
         marginal_grid: grid,
-        levels: models,
+        levels: levels.into(),
         band_marginals,
     };
-    (subspace, notes.into_iter().flatten().collect())
+    (subspace, fits.into_iter().filter_map(|f| f.1).collect())
 }

@@ -94,7 +94,7 @@ impl AnyModel {
     /// The measured view directions the model was fitted on.
     pub fn views(&self) -> &DirectionSet {
         match self {
-            AnyModel::Mrf(m) => &m.views,
+            AnyModel::Mrf(m) => m.views(),
             AnyModel::Lpca(m) => m.views(),
         }
     }
@@ -102,7 +102,7 @@ impl AnyModel {
     /// The measured light directions the model was fitted on.
     pub fn lights(&self) -> &DirectionSet {
         match self {
-            AnyModel::Mrf(m) => &m.lights,
+            AnyModel::Mrf(m) => m.lights(),
             AnyModel::Lpca(m) => m.lights(),
         }
     }

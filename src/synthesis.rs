@@ -19,9 +19,9 @@ use crate::decompose::{Border, Pyramid};
 use crate::geometry::integrate::{Edges, normals_of_periodic};
 use crate::geometry::relight::shading_factor;
 use crate::geometry::{quilt, resample_periodic};
-use crate::model::{BandModel, LevelModel, MaterialModel, ModelError, Result};
+use crate::model::{MaterialModel, ModelError, Result};
 use crate::mrf::noise::standard_normal;
-use crate::mrf::{Car2dModel, Car3dModel, GmrfModel};
+use crate::mrf::{BandModel, Levels, LevelsVisitor};
 
 /// The largest synthesized side, pixels (a 4096^2 image peaks near 2 GB; 8192^2 near 8 GB).
 pub const MAX_SIDE: usize = 8192;
@@ -37,7 +37,8 @@ pub struct SynthesisOptions {
     pub seed: u64,
     /// Make the output tile seamlessly (every model is then sampled exactly on the torus: by
     /// FFT for the GMRF, by the DFT solution of the circulant recursion for the CAR models).
-    /// Needs sizes divisible by `2^(levels - 1)`.
+    /// Needs sizes divisible by the pyramid step
+    /// ([`pyramid_step`](crate::decompose::pyramid::pyramid_step)).
     pub tileable: bool,
 }
 
@@ -129,9 +130,53 @@ impl SynthesisCache {
     }
 }
 
-/// A seed for one band: mixes the user's seed with the band's identity.
-fn band_seed(seed: u64, factor: usize, level: usize) -> u64 {
-    crate::mrf::noise::mix(seed, (factor as u64) << 32 | level as u64)
+/// A seed for one band: mixes the user's seed with the band's identity, the noise stream
+/// (see [`noise_stream`]) and the pyramid level.
+fn band_seed(seed: u64, stream: usize, level: usize) -> u64 {
+    crate::mrf::noise::mix(seed, (stream as u64) << 32 | level as u64)
+}
+
+/// The noise stream of a model of `planes` planes starting at factor plane `first`: a model of
+/// one plane draws the factor's own stream (0, 1, 2); a joint model of the colour channels
+/// draws stream 3, apart from them.
+fn noise_stream(planes: usize, first: usize) -> usize {
+    if planes == 1 { first } else { 3 }
+}
+
+/// Synthesizes every band of a subspace image (in parallel), as `bands[factor][level]`.
+struct SynthesizeBands<'a> {
+    /// Band shapes, finest level first.
+    shapes: &'a [(usize, usize)],
+    options: &'a SynthesisOptions,
+    noise: &'a NoiseBank,
+}
+
+impl LevelsVisitor for SynthesizeBands<'_> {
+    type Output = Vec<Vec<Array2<f64>>>;
+    fn visit<M: BandModel>(self, levels: &Levels<M>) -> Self::Output {
+        let (o, n) = (self.options, levels.levels().len());
+        let groups = Levels::<M>::PER_LEVEL;
+        // Band i is group i / n (of M::PLANES factor planes) at level i % n.
+        let samples: Vec<Array3<f64>> = (0..groups * n)
+            .into_par_iter()
+            .map(|i| {
+                let (group, lv) = (i / n, i % n);
+                let (r, c) = self.shapes[lv];
+                let stream = noise_stream(M::PLANES, group * M::PLANES);
+                let len = M::noise_len(r, c, o.tileable);
+                let noise = self.noise.draw(band_seed(o.seed, stream, lv), len);
+                levels.levels()[lv][group].synthesize_from(r, c, &noise, o.tileable)
+            })
+            .collect();
+        let mut planes: Vec<Vec<Array2<f64>>> = (0..3).map(|_| Vec::with_capacity(n)).collect();
+        for (i, sample) in samples.into_iter().enumerate() {
+            let group = i / n;
+            for (p, plane) in sample.outer_iter().enumerate() {
+                planes[group * M::PLANES + p].push(plane.to_owned());
+            }
+        }
+        planes
+    }
 }
 
 fn check(model: &MaterialModel, o: &SynthesisOptions) -> Result<()> {
@@ -187,8 +232,8 @@ impl MaterialModel {
         o: &SynthesisOptions,
         noise: &NoiseBank,
     ) -> Result<Array3<f32>> {
-        let s = self.subspaces.get(k).ok_or_else(|| {
-            ModelError::parameter("subspace", format!("{k} of {}", self.subspaces.len()))
+        let s = self.subspaces().get(k).ok_or_else(|| {
+            ModelError::parameter("subspace", format!("{k} of {}", self.subspaces().len()))
         })?;
         let shapes = Pyramid::shapes(o.rows, o.cols, s.levels.len());
         let border = if o.tileable {
@@ -196,58 +241,11 @@ impl MaterialModel {
         } else {
             Border::Mirror
         };
-        let n = s.levels.len();
-        // bands[factor][level]
-        let bands: Vec<Vec<Array2<f64>>> = match &s.levels[0] {
-            LevelModel::Joint(_) => {
-                let joint: Vec<Array3<f64>> = s
-                    .levels
-                    .par_iter()
-                    .zip(&shapes)
-                    .enumerate()
-                    .map(|(lv, (level, &(r, c)))| match level {
-                        LevelModel::Joint(m) => {
-                            let len = Car3dModel::noise_len(r, c, o.tileable);
-                            let w = noise.draw(band_seed(o.seed, 3, lv), len);
-                            m.synthesize_from(r, c, &w, o.tileable)
-                        }
-                        LevelModel::Factors(_) => Array3::zeros((3, r, c)),
-                    })
-                    .collect();
-                (0..3)
-                    .map(|ch| {
-                        joint
-                            .iter()
-                            .map(|b| b.index_axis(Axis(0), ch).to_owned())
-                            .collect()
-                    })
-                    .collect()
-            }
-            LevelModel::Factors(_) => {
-                let mut planes: Vec<Array2<f64>> = (0..3 * n)
-                    .into_par_iter()
-                    .map(|i| {
-                        let (factor, lv) = (i / n, i % n);
-                        let (r, c) = shapes[lv];
-                        let seed = band_seed(o.seed, factor, lv);
-                        match &s.levels[lv] {
-                            LevelModel::Factors(bands) => match &bands[factor] {
-                                BandModel::Car2d(m) => {
-                                    let len = Car2dModel::noise_len(r, c, o.tileable);
-                                    m.synthesize_from(r, c, &noise.draw(seed, len), o.tileable)
-                                }
-                                BandModel::Gmrf(m) => {
-                                    let len = GmrfModel::noise_len(r, c);
-                                    m.synthesize_from(r, c, &noise.draw(seed, len))
-                                }
-                            },
-                            LevelModel::Joint(_) => Array2::zeros((r, c)),
-                        }
-                    })
-                    .collect();
-                (0..3).map(|_| planes.drain(..n).collect()).collect()
-            }
-        };
+        let bands = s.levels.visit(SynthesizeBands {
+            shapes: &shapes,
+            options: o,
+            noise,
+        });
         let (band_probabilities, factor_probabilities) = (
             marginals::band_probabilities(),
             s.marginal_grid.probabilities(marginals::QUANTILES),
@@ -289,8 +287,8 @@ impl MaterialModel {
         view: &Direction,
         light: &Direction,
     ) -> Result<Vec<(usize, usize, f64)>> {
-        let wv = self.views.interpolate(view)?;
-        let wl = self.lights.interpolate(light)?;
+        let wv = self.views().interpolate(view)?;
+        let wl = self.lights().interpolate(light)?;
         let mut pairs = Vec::with_capacity(9);
         for Weighted {
             index: v,
@@ -321,7 +319,7 @@ impl MaterialModel {
     ) -> Result<BTreeMap<usize, f64>> {
         let mut weights = BTreeMap::new();
         for (v, l, w) in self.neighbouring_pairs(view, light)? {
-            *weights.entry(self.cluster_of(v, l)).or_insert(0.0) += w;
+            *weights.entry(self.cluster_of(v, l)?).or_insert(0.0) += w;
         }
         Ok(weights)
     }
@@ -361,7 +359,9 @@ impl MaterialModel {
     ) -> SynthesisCache {
         SynthesisCache {
             options: *o,
-            subspaces: (0..self.subspaces.len()).map(|_| OnceLock::new()).collect(),
+            subspaces: (0..self.subspaces().len())
+                .map(|_| OnceLock::new())
+                .collect(),
             heights,
             normals: OnceLock::new(),
             noise,
@@ -461,7 +461,7 @@ impl MaterialModel {
     /// `rows / step` x `cols / step` samples and resampled to the output, so the relief keeps
     /// its measured structure, repeats on no grid, and the result tiles exactly at any size.
     pub fn range_heights(&self, rows: usize, cols: usize, seed: u64) -> Option<Array2<f64>> {
-        let map = self.range_map.as_ref()?;
+        let map = self.range_map()?;
         let side = |n: usize| ((n as f64 / map.step as f64).round() as usize).max(1);
         let torus = quilt(
             &map.samples(),
@@ -479,11 +479,11 @@ impl MaterialModel {
     /// # Errors
     /// A non-finite direction.
     pub fn bump_strength(&self, light: &Direction) -> Result<f64> {
-        let Some(map) = &self.range_map else {
+        let Some(map) = self.range_map() else {
             return Ok(1.0);
         };
         Ok(self
-            .lights
+            .lights()
             .interpolate(light)?
             .iter()
             .map(|w| w.weight * map.strength_of(w.index))
@@ -524,10 +524,22 @@ mod tests {
     use super::*;
 
     #[test]
-    fn band_seeds_differ_by_factor_and_level_only() {
-        assert_eq!(band_seed(1, 0, 0), band_seed(1, 0, 0));
-        assert_ne!(band_seed(1, 0, 0), band_seed(1, 1, 0));
-        assert_ne!(band_seed(1, 0, 0), band_seed(1, 0, 1));
-        assert_ne!(band_seed(1, 0, 0), band_seed(2, 0, 0));
+    fn band_seeds_differ_for_every_seed_stream_and_level() {
+        let mut seen = std::collections::HashSet::new();
+        for seed in 0..4 {
+            for stream in 0..4 {
+                for level in 0..16 {
+                    let s = band_seed(seed, stream, level);
+                    assert!(seen.insert(s), "{seed} {stream} {level} repeats {s}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn one_plane_models_draw_their_factor_stream_and_joint_models_their_own() {
+        let streams: Vec<usize> = (0..3).map(|f| noise_stream(1, f)).collect();
+        assert_eq!(streams, [0, 1, 2]);
+        assert_eq!(noise_stream(3, 0), 3);
     }
 }

@@ -270,7 +270,7 @@ fn synthesized_images_stay_the_same_surface_under_different_lights() {
     let (mut sum_measured, mut sum_shared) = (0.0, 0.0);
     for i in 0..lights.len() {
         for j in i + 1..lights.len() {
-            if model.cluster_of(0, lights[i]) == model.cluster_of(0, lights[j]) {
+            if model.cluster_of(0, lights[i]).unwrap() == model.cluster_of(0, lights[j]).unwrap() {
                 continue;
             }
             let m = luminance_correlation(&measured[i], &measured[j]);

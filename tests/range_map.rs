@@ -172,7 +172,12 @@ fn relights_like_the_photographs(set: &str) {
     for (l, d) in btf.lights().iter().enumerate() {
         let own = model.subspace_weights(&view, d).unwrap();
         assert!(
-            (own.get(&model.cluster_of(0, l)).copied().unwrap_or(0.0) - 1.0).abs() < 1e-9,
+            (own.get(&model.cluster_of(0, l).unwrap())
+                .copied()
+                .unwrap_or(0.0)
+                - 1.0)
+                .abs()
+                < 1e-9,
             "{set}: measured light {l} ({d:?}) blends {own:?}"
         );
         let (mp, sp) = mean_std(&photos[l]);

@@ -201,6 +201,15 @@ impl Pyramid {
     }
 }
 
+/// The size step of a pyramid of `levels` levels, `2^(levels - 1)` (1 for zero levels): the
+/// coarsest band's pixel covers that many pixels a side, so an image needs at least this side
+/// for every level to keep a pixel, and a multiple of it to halve exactly at every level (a
+/// tileable synthesis). The one place this rule is written. (Models have at most 16 levels;
+/// the shift is capped only so that no argument overflows it.)
+pub fn pyramid_step(levels: usize) -> usize {
+    1 << levels.saturating_sub(1).min(usize::BITS as usize - 2)
+}
+
 /// A sensible number of levels: the coarsest band keeps at least `min_side` pixels a side.
 pub fn auto_levels(rows: usize, cols: usize, min_side: usize, max_levels: usize) -> usize {
     let mut levels = 1;
@@ -216,6 +225,16 @@ pub fn auto_levels(rows: usize, cols: usize, min_side: usize, max_levels: usize)
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_pyramid_step_halves_once_per_level_below_the_finest() {
+        assert_eq!(pyramid_step(0), 1);
+        assert_eq!(pyramid_step(1), 1);
+        assert_eq!(pyramid_step(4), 8);
+        // Each level of a side that is a multiple of the step halves exactly.
+        assert_eq!(Pyramid::shapes(40, 24, 4).last(), Some(&(5, 3)));
+        assert_eq!(pyramid_step(usize::MAX), 1 << (usize::BITS - 2));
+    }
 
     fn field(h: usize, w: usize) -> Array2<f64> {
         Array2::from_shape_fn((h, w), |(i, j)| {

@@ -302,7 +302,7 @@ pub fn bench_mrf(
     let result = MethodResult {
         method: MethodId::Mrf {
             kind,
-            clusters: model.subspaces.len(),
+            clusters: model.subspaces().len(),
             levels: model.levels(),
         },
         analysis_seconds,

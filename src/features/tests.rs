@@ -3,6 +3,8 @@
 //! the quantities that are not invariant do change (so the tests can fail).
 
 use nalgebra::{DMatrix, Matrix3};
+
+use crate::mrf::BandModel;
 use ndarray::Array3;
 use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64Mcg;

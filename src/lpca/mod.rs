@@ -676,7 +676,7 @@ impl Scores {
     }
 
     fn view(&mut self, model: &LpcaModel, v: usize, inputs: &[Array3<f32>]) -> Result<()> {
-        let nl = model.lights.len();
+        let nl = model.lights().len();
         let results: Vec<(f64, f64)> = inputs
             .par_iter()
             .enumerate()
@@ -689,7 +689,7 @@ impl Scores {
             self.per_image[v * nl + l] = de;
             self.squared[v * nl + l] = sq;
         }
-        self.samples += (inputs.len() * 3 * model.width * model.height) as f64;
+        self.samples += (inputs.len() * 3 * model.width() * model.height()) as f64;
         Ok(())
     }
 

@@ -3,17 +3,14 @@
 
 use std::path::Path;
 
-use super::material::{
-    BandMarginals, BandModel, LevelModel, MaterialModel, ModelKind, RangeMap, SubspaceModel,
-};
+use super::material::{BandMarginals, MaterialModel, MaterialParts, RangeMap, SubspaceModel};
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
 use crate::decompose::marginals::{BAND_QUANTILES, QUANTILES, QuantileGrid};
 use crate::decompose::{ColourSpace, KlBasis};
-use crate::io::bytes::{Parse, Reader};
+pub use crate::io::bytes::{Parse, Reader};
 use crate::io::envelope;
-use crate::mrf::neighbourhood::{MAX_ORDER, causal};
-use crate::mrf::{Car2dModel, Car3dModel, GmrfModel, car3d::MAX_ORDER_3D};
+use crate::mrf::{AnyLevels, BandModel, KindVisitor, Levels, LevelsVisitor, ModelKind};
 
 /// The four bytes every model file starts with.
 pub const MAGIC: [u8; 4] = *b"BTFM";
@@ -25,55 +22,88 @@ pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
 pub const MAX_LEVELS: u8 = 16;
 
-struct Writer(Vec<u8>);
+/// Appends little-endian values to a model file payload (band model records use it, see
+/// [`crate::mrf::BandModel::write`]).
+#[derive(Debug, Default)]
+pub struct Writer(Vec<u8>);
 
 impl Writer {
-    fn u8(&mut self, v: u8) {
+    /// Appends a byte.
+    pub fn u8(&mut self, v: u8) {
         self.0.push(v);
     }
-    fn u16(&mut self, v: u16) {
+    /// Appends a little-endian `u16`.
+    pub fn u16(&mut self, v: u16) {
         self.0.extend_from_slice(&v.to_le_bytes());
     }
-    fn u32(&mut self, v: u32) {
+    /// Appends a little-endian `u32`.
+    pub fn u32(&mut self, v: u32) {
         self.0.extend_from_slice(&v.to_le_bytes());
     }
-    fn f32(&mut self, v: f64) {
+    /// Appends `v` in single precision.
+    pub fn f32(&mut self, v: f64) {
         self.0.extend_from_slice(&(v as f32).to_le_bytes());
     }
-    fn f32s(&mut self, v: &[f64]) {
+    /// Appends every value in single precision.
+    pub fn f32s(&mut self, v: &[f64]) {
         v.iter().for_each(|&x| self.f32(x));
     }
 }
 
-fn kind_code(kind: ModelKind) -> u8 {
-    match kind {
-        ModelKind::Gmrf => 0,
-        ModelKind::Car2d => 1,
-        ModelKind::Car3d => 2,
+/// Writes every level's band model records, finest level first.
+struct WriteLevels<'a>(&'a mut Writer);
+
+impl LevelsVisitor for WriteLevels<'_> {
+    type Output = ();
+    fn visit<M: BandModel>(self, levels: &Levels<M>) {
+        levels
+            .levels()
+            .iter()
+            .flatten()
+            .for_each(|m| m.write(self.0));
+    }
+}
+
+/// Reads `levels` levels of band model records of one family.
+struct ReadLevels<'r, 'a> {
+    reader: &'r mut Reader<'a>,
+    levels: usize,
+}
+
+impl KindVisitor for ReadLevels<'_, '_> {
+    type Output = Parse<AnyLevels>;
+    fn visit<M: BandModel>(self) -> Parse<AnyLevels>
+    where
+        Levels<M>: Into<AnyLevels>,
+    {
+        let levels = (0..self.levels)
+            .map(|_| {
+                (0..Levels::<M>::PER_LEVEL)
+                    .map(|_| M::read(self.reader))
+                    .collect()
+            })
+            .collect::<Parse<Vec<Vec<M>>>>()?;
+        Ok(Levels::new(levels).ok_or("no pyramid levels")?.into())
     }
 }
 
 /// Serialises a model to bytes (header, payload, CRC-32 of the payload).
 pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
     let mut w = Writer(Vec::new());
-    w.u8(kind_code(model.kind));
-    w.u32(model.width);
-    w.u32(model.height);
+    w.u8(model.kind().code());
+    w.u32(model.width());
+    w.u32(model.height());
     w.u8(model.levels() as u8);
-    for set in [&model.views, &model.lights] {
-        w.u16(set.len() as u16);
-        for d in set {
-            w.f32(d.theta_deg);
-            w.f32(d.phi_deg);
-        }
+    for set in [model.views(), model.lights()] {
+        set.write_le(&mut w.0);
     }
-    w.u16(model.subspaces.len() as u16);
-    let wide = model.subspaces.len() > 256;
+    w.u16(model.subspaces().len() as u16);
+    let wide = model.subspaces().len() > 256;
     w.u8(if wide { 2 } else { 1 });
-    for &c in &model.cluster_table {
+    for &c in model.cluster_table() {
         if wide { w.u16(c) } else { w.u8(c as u8) }
     }
-    for s in &model.subspaces {
+    for s in model.subspaces() {
         w.u16(s.representative.0);
         w.u16(s.representative.1);
         w.f32s(&s.kl.mean);
@@ -83,30 +113,9 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
         for q in &s.marginals {
             w.f32s(q);
         }
-        for level in &s.levels {
-            match level {
-                LevelModel::Factors(bands) => {
-                    for band in bands {
-                        match band {
-                            BandModel::Car2d(m) => {
-                                write_band(&mut w, m.order, m.mean, m.sigma2, &m.gamma)
-                            }
-                            BandModel::Gmrf(m) => {
-                                write_band(&mut w, m.order, m.mean, m.sigma2, &m.gamma)
-                            }
-                        }
-                    }
-                }
-                LevelModel::Joint(m) => {
-                    w.u8(m.order);
-                    w.f32s(&m.mean);
-                    w.f32s(&m.sigma);
-                    w.f32s(&m.a);
-                }
-            }
-        }
+        s.levels.visit(WriteLevels(&mut w));
     }
-    match &model.range_map {
+    match model.range_map() {
         None => w.u8(0),
         Some(r) => {
             w.u8(if r.strength.is_empty() { 1 } else { 2 });
@@ -143,7 +152,7 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
 /// The version 2 tail: the colour space, then the band quantile tables if any.
 fn write_colour(w: &mut Writer, model: &MaterialModel) {
     let space = model
-        .subspaces
+        .subspaces()
         .first()
         .map_or(ColourSpace::Lab, |s| s.kl.space);
     w.u8(match space {
@@ -151,16 +160,16 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
         ColourSpace::Lab => 1,
     });
     let grid = model
-        .subspaces
+        .subspaces()
         .first()
         .map_or(QuantileGrid::NormalTails, |s| s.marginal_grid);
     w.u8(match grid {
         QuantileGrid::Uniform => 0,
         QuantileGrid::NormalTails => 1,
     });
-    let with_bands = model.subspaces.iter().all(|s| s.band_marginals.is_some());
+    let with_bands = model.subspaces().iter().all(|s| s.band_marginals.is_some());
     w.u8(if with_bands { BAND_QUANTILES as u8 } else { 0 });
-    for s in model.subspaces.iter().filter(|_| with_bands) {
+    for s in model.subspaces().iter().filter(|_| with_bands) {
         for table in s
             .band_marginals
             .iter()
@@ -174,7 +183,7 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
 /// Bytes the band quantile tables take in the file (0 without them).
 pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
     let tables: usize = model
-        .subspaces
+        .subspaces()
         .iter()
         .filter_map(|s| s.band_marginals.as_ref())
         .map(|b| 3 * b.tables.len())
@@ -202,13 +211,6 @@ fn write_quantised(w: &mut Writer, values: &[f64]) {
     }
 }
 
-fn write_band(w: &mut Writer, order: u8, mean: f64, sigma2: f64, gamma: &[f64]) {
-    w.u8(order);
-    w.f32(mean);
-    w.f32(sigma2);
-    w.f32s(gamma);
-}
-
 /// Parses a model from bytes; `path` is only used in messages.
 ///
 /// # Errors
@@ -226,12 +228,8 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     let (version, payload) =
         envelope::open_versions(bytes, MAGIC, ".btfm", 1..=VERSION, MAX_PAYLOAD)?;
     let mut r = Reader::new(payload);
-    let kind = match r.u8()? {
-        0 => ModelKind::Gmrf,
-        1 => ModelKind::Car2d,
-        2 => ModelKind::Car3d,
-        k => return Err(format!("unknown model kind {k}")),
-    };
+    let code = r.u8()?;
+    let kind = ModelKind::from_code(code).ok_or_else(|| format!("unknown model kind {code}"))?;
     let (width, height) = (r.u32()?, r.u32()?);
     if width == 0
         || height == 0
@@ -303,49 +301,10 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             }
             table.copy_from_slice(&q);
         }
-        let mut level_models = Vec::with_capacity(usize::from(levels));
-        for _ in 0..levels {
-            level_models.push(match kind {
-                ModelKind::Car3d => {
-                    let order = r.u8_at_most(MAX_ORDER_3D, "neighbourhood order")?;
-                    let mean: [f64; 3] = r.f32s(3)?.try_into().expect("3");
-                    let sigma: [f64; 9] = r.f32s(9)?.try_into().expect("9");
-                    let a = r.f32s(9 * causal(usize::from(order)).len())?;
-                    LevelModel::Joint(Car3dModel {
-                        order,
-                        a,
-                        sigma,
-                        mean,
-                    })
-                }
-                _ => {
-                    let band = |r: &mut Reader| -> Parse<BandModel> {
-                        let order = r.u8_at_most(MAX_ORDER, "neighbourhood order")?;
-                        let (mean, sigma2) = (r.f32()?, r.f32()?);
-                        if sigma2 < 0.0 {
-                            return Err(format!("negative noise variance {sigma2}"));
-                        }
-                        let gamma = r.f32s(causal(usize::from(order)).len())?;
-                        Ok(if kind == ModelKind::Gmrf {
-                            BandModel::Gmrf(GmrfModel {
-                                order,
-                                gamma,
-                                sigma2,
-                                mean,
-                            })
-                        } else {
-                            BandModel::Car2d(Car2dModel {
-                                order,
-                                gamma,
-                                sigma2,
-                                mean,
-                            })
-                        })
-                    };
-                    LevelModel::Factors([band(&mut r)?, band(&mut r)?, band(&mut r)?])
-                }
-            });
-        }
+        let level_models = kind.visit(ReadLevels {
+            reader: &mut r,
+            levels: usize::from(levels),
+        })?;
         subspaces.push(SubspaceModel {
             representative,
             kl,
@@ -395,8 +354,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         read_colour(&mut r, &mut subspaces, usize::from(levels))?;
     }
     r.finish()?;
-    Ok(MaterialModel {
-        kind,
+    MaterialModel::new(MaterialParts {
         views,
         lights,
         width,
@@ -405,6 +363,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         subspaces,
         range_map,
     })
+    .map_err(|e| e.to_string())
 }
 
 /// Reads the version 2 tail (see [`write_colour`]) into the subspace models.

@@ -2,38 +2,14 @@
 
 use ndarray::Array2;
 
+use super::{ModelError, Result};
 use crate::btf::DirectionSet;
 use crate::decompose::KlBasis;
 #[cfg(doc)]
 use crate::decompose::marginals::BAND_QUANTILES;
 use crate::decompose::marginals::{QuantileGrid, Quantiles};
-use crate::decompose::pyramid::{Taps, apply_separable};
-use crate::mrf::{Car2dModel, Car3dModel, GmrfModel};
-
-/// Which MRF models the bands.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-pub enum ModelKind {
-    /// Gaussian MRF per KL factor and pyramid level (exactly tileable synthesis by FFT).
-    Gmrf,
-    /// 2D causal autoregressive model per KL factor and pyramid level.
-    Car2d,
-    /// 3D causal autoregressive model per pyramid level on the colour channels jointly.
-    Car3d,
-}
-
-impl ModelKind {
-    /// Every kind, in file-code order.
-    pub const ALL: [ModelKind; 3] = [ModelKind::Gmrf, ModelKind::Car2d, ModelKind::Car3d];
-
-    /// The name on the command line and in reports.
-    pub fn name(&self) -> &'static str {
-        match self {
-            ModelKind::Gmrf => "gmrf",
-            ModelKind::Car2d => "2dcar",
-            ModelKind::Car3d => "3dcar",
-        }
-    }
-}
+use crate::decompose::pyramid::{Taps, apply_separable, pyramid_step};
+use crate::mrf::{AnyLevels, ModelKind};
 
 impl std::str::FromStr for ModelKind {
     type Err = super::ModelError;
@@ -42,36 +18,14 @@ impl std::str::FromStr for ModelKind {
             .into_iter()
             .find(|k| k.name().eq_ignore_ascii_case(s))
             .ok_or_else(|| {
+                let names: Vec<&str> = Self::ALL.iter().map(ModelKind::name).collect();
+                let (last, rest) = names.split_last().expect("at least one kind");
                 super::ModelError::parameter(
                     "--model",
-                    format!("'{s}' is not gmrf, 2dcar or 3dcar"),
+                    format!("'{s}' is not {} or {last}", rest.join(", ")),
                 )
             })
     }
-}
-
-impl std::fmt::Display for ModelKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// A mono-spectral band model.
-#[derive(Debug, Clone, PartialEq)]
-pub enum BandModel {
-    /// A 2D CAR band.
-    Car2d(Car2dModel),
-    /// A GMRF band.
-    Gmrf(GmrfModel),
-}
-
-/// The model of one pyramid level of one subspace image.
-#[derive(Debug, Clone, PartialEq)]
-pub enum LevelModel {
-    /// One model per KL factor (2D CAR, GMRF).
-    Factors([BandModel; 3]),
-    /// One joint colour model (3D CAR).
-    Joint(Car3dModel),
 }
 
 /// The model of one subspace image (one cluster of the view x light space).
@@ -86,8 +40,8 @@ pub struct SubspaceModel {
     pub marginals: [Quantiles; 3],
     /// The probabilities of `marginals` (uniform in version 1 files).
     pub marginal_grid: QuantileGrid,
-    /// Level models, finest first.
-    pub levels: Vec<LevelModel>,
+    /// Level models, finest first, all of one family.
+    pub levels: AnyLevels,
     /// Quantile tables of the measured pyramid bands, if the model matches band marginals.
     pub band_marginals: Option<BandMarginals>,
 }
@@ -156,11 +110,9 @@ impl RangeMap {
     }
 }
 
-/// A whole material: clustering, subspace models and range map. Written as `.btfm`.
+/// The parts of a [`MaterialModel`], checked by [`MaterialModel::new`].
 #[derive(Debug, Clone, PartialEq)]
-pub struct MaterialModel {
-    /// The band model family.
-    pub kind: ModelKind,
+pub struct MaterialParts {
     /// The measured view directions.
     pub views: DirectionSet,
     /// The measured light directions.
@@ -177,26 +129,285 @@ pub struct MaterialModel {
     pub range_map: Option<RangeMap>,
 }
 
+/// A whole material: clustering, subspace models and range map. Written as `.btfm`. Only
+/// consistent models exist (see [`MaterialModel::new`]); the band model family is that of the
+/// subspaces' levels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MaterialModel {
+    parts: MaterialParts,
+}
+
+/// The most views, lights or clusters a model holds (they are 16-bit in the file).
+const MAX_COUNT: usize = u16::MAX as usize;
+
 impl MaterialModel {
-    /// Number of pyramid levels.
-    pub fn levels(&self) -> usize {
-        self.subspaces.first().map_or(0, |s| s.levels.len())
+    /// Checks that the parts fit together: non-zero image size; at most 65535 views, lights
+    /// and clusters; one cluster table entry per (view, light), each naming a subspace; every
+    /// subspace of the same family and the same number of levels (1..=16), with its
+    /// representative among the directions and band tables (if any) for every level; a
+    /// range map with `rows * cols` samples, rows, columns and step in 1..=65535, and no
+    /// strength or one per light. (So the file's 8- and 16-bit counts never truncate.)
+    ///
+    /// # Errors
+    /// [`ModelError::InvalidParameter`] (named `model`) saying which part does not fit.
+    pub fn new(parts: MaterialParts) -> Result<Self> {
+        let bad = |reason: String| Err(ModelError::parameter("model", reason));
+        let (nv, nl) = (parts.views.len(), parts.lights.len());
+        if parts.width == 0 || parts.height == 0 {
+            return bad(format!("image size {}x{}", parts.width, parts.height));
+        }
+        if nv == 0 || nl == 0 || nv > MAX_COUNT || nl > MAX_COUNT {
+            return bad(format!("{nv} views x {nl} lights (1..={MAX_COUNT} each)"));
+        }
+        let clusters = parts.subspaces.len();
+        if clusters == 0 || clusters > MAX_COUNT {
+            return bad(format!("{clusters} subspaces (1..={MAX_COUNT})"));
+        }
+        if parts.cluster_table.len() != nv * nl {
+            return bad(format!(
+                "{} cluster table entries for {nv} x {nl} pairs",
+                parts.cluster_table.len()
+            ));
+        }
+        if let Some(c) = parts
+            .cluster_table
+            .iter()
+            .find(|&&c| usize::from(c) >= clusters)
+        {
+            return bad(format!("cluster table names cluster {c} of {clusters}"));
+        }
+        let first = &parts.subspaces[0].levels;
+        let (kind, levels) = (first.kind(), first.len());
+        if levels > usize::from(super::format::MAX_LEVELS) {
+            return bad(format!(
+                "{levels} pyramid levels (1..={} accepted)",
+                super::format::MAX_LEVELS
+            ));
+        }
+        for (k, s) in parts.subspaces.iter().enumerate() {
+            if s.levels.kind() != kind || s.levels.len() != levels {
+                return bad(format!(
+                    "subspace {k} has {} {} levels, subspace 0 {levels} {kind} levels",
+                    s.levels.len(),
+                    s.levels.kind()
+                ));
+            }
+            let (v, l) = s.representative;
+            if usize::from(v) >= nv || usize::from(l) >= nl {
+                return bad(format!(
+                    "subspace {k}: representative ({v}, {l}) outside the direction sets"
+                ));
+            }
+            if let Some(b) = &s.band_marginals
+                && b.tables.len() != levels
+            {
+                return bad(format!(
+                    "subspace {k}: band tables for {} of {levels} levels",
+                    b.tables.len()
+                ));
+            }
+        }
+        if let Some(r) = &parts.range_map {
+            let sides = [r.rows, r.cols, r.step];
+            if sides.iter().any(|&n| n == 0 || n > MAX_COUNT) || r.heights.len() != r.rows * r.cols
+            {
+                return bad(format!(
+                    "range map of {} samples as {}x{} with step {}",
+                    r.heights.len(),
+                    r.rows,
+                    r.cols,
+                    r.step
+                ));
+            }
+            if !r.strength.is_empty() && r.strength.len() != nl {
+                return bad(format!(
+                    "{} bump strengths for {nl} lights",
+                    r.strength.len()
+                ));
+            }
+        }
+        Ok(Self { parts })
     }
 
-    /// The smallest side, pixels, a synthesis of this model can have: `2^(levels - 1)`, so
-    /// that every pyramid level keeps at least one pixel a side (and a tileable size divisible
-    /// by it halves exactly). The one size rule for synthesis, tiling and rendering.
+    /// The parts, to change and check again with [`MaterialModel::new`].
+    pub fn into_parts(self) -> MaterialParts {
+        self.parts
+    }
+
+    /// The band model family.
+    pub fn kind(&self) -> ModelKind {
+        self.parts.subspaces[0].levels.kind()
+    }
+
+    /// The measured view directions.
+    pub fn views(&self) -> &DirectionSet {
+        &self.parts.views
+    }
+
+    /// The measured light directions.
+    pub fn lights(&self) -> &DirectionSet {
+        &self.parts.lights
+    }
+
+    /// Width of the measured images, pixels.
+    pub fn width(&self) -> u32 {
+        self.parts.width
+    }
+
+    /// Height of the measured images, pixels.
+    pub fn height(&self) -> u32 {
+        self.parts.height
+    }
+
+    /// Cluster of every measured (view, light), view-major; each entry names a subspace.
+    pub fn cluster_table(&self) -> &[u16] {
+        &self.parts.cluster_table
+    }
+
+    /// One model per cluster (at least one).
+    pub fn subspaces(&self) -> &[SubspaceModel] {
+        &self.parts.subspaces
+    }
+
+    /// The surface relief, if estimated.
+    pub fn range_map(&self) -> Option<&RangeMap> {
+        self.parts.range_map.as_ref()
+    }
+
+    /// Number of pyramid levels (the same in every subspace).
+    pub fn levels(&self) -> usize {
+        self.parts.subspaces[0].levels.len()
+    }
+
+    /// The smallest side, pixels, a synthesis of this model can have: the pyramid step
+    /// ([`pyramid_step`]), so that every level keeps at least one pixel a side (and a
+    /// tileable size divisible by it halves exactly). The one size rule for synthesis, tiling
+    /// and rendering.
     pub fn min_synthesis_side(&self) -> usize {
-        let levels = self.subspaces.iter().map(|s| s.levels.len()).max();
-        1 << levels
-            .unwrap_or(1)
-            .max(1)
-            .saturating_sub(1)
-            .min(usize::BITS as usize - 2)
+        pyramid_step(self.levels())
     }
 
     /// The cluster of measured pair (view, light).
-    pub fn cluster_of(&self, view: usize, light: usize) -> usize {
-        usize::from(self.cluster_table[view * self.lights.len() + light])
+    ///
+    /// # Errors
+    /// `view` or `light` is not a measured direction's index.
+    pub fn cluster_of(&self, view: usize, light: usize) -> Result<usize> {
+        let (nv, nl) = (self.parts.views.len(), self.parts.lights.len());
+        if view >= nv || light >= nl {
+            return Err(ModelError::parameter(
+                "direction",
+                format!("pair ({view}, {light}) of {nv} views x {nl} lights"),
+            ));
+        }
+        Ok(usize::from(self.parts.cluster_table[view * nl + light]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::btf::Direction;
+    use crate::decompose::ColourSpace;
+    use crate::decompose::marginals::QUANTILES;
+    use crate::mrf::{BandModel, Car2dModel, Car3dModel, GmrfModel, Levels};
+
+    /// A subspace of `levels` constant levels of model `M`.
+    fn flat<M: BandModel>(levels: usize, model: M) -> SubspaceModel
+    where
+        Levels<M>: Into<AnyLevels>,
+    {
+        let per_level = vec![model; Levels::<M>::PER_LEVEL];
+        SubspaceModel {
+            representative: (0, 1),
+            kl: KlBasis::identity(ColourSpace::LinearRgb),
+            marginals: [[0.0; QUANTILES]; 3],
+            marginal_grid: QuantileGrid::Uniform,
+            levels: Levels::new(vec![per_level; levels]).unwrap().into(),
+            band_marginals: None,
+        }
+    }
+
+    /// Two views, three lights, two 2D CAR subspaces of two levels; pair i in cluster i % 2.
+    fn parts() -> MaterialParts {
+        let dirs = |n: usize| {
+            DirectionSet::new(
+                (0..n)
+                    .map(|i| Direction::new(10.0 * i as f64, 0.0))
+                    .collect(),
+            )
+            .unwrap()
+        };
+        MaterialParts {
+            views: dirs(2),
+            lights: dirs(3),
+            width: 8,
+            height: 8,
+            cluster_table: (0..6).map(|i| i % 2).collect(),
+            subspaces: vec![flat(2, Car2dModel::constant(0.5)); 2],
+            range_map: None,
+        }
+    }
+
+    fn refused(change: impl FnOnce(&mut MaterialParts)) -> String {
+        let mut p = parts();
+        change(&mut p);
+        match MaterialModel::new(p) {
+            Ok(_) => panic!("inconsistent parts accepted"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn consistent_parts_make_a_model_of_their_levels_kind() {
+        let model = MaterialModel::new(parts()).unwrap();
+        assert_eq!(model.kind(), ModelKind::Car2d);
+        assert_eq!((model.levels(), model.min_synthesis_side()), (2, 2));
+        let mut p = parts();
+        p.subspaces = vec![
+            flat(
+                2,
+                Car3dModel::fit(ndarray::Array3::zeros((3, 4, 4)).view(), 1).model
+            );
+            2
+        ];
+        assert_eq!(MaterialModel::new(p).unwrap().kind(), ModelKind::Car3d);
+    }
+
+    #[test]
+    fn inconsistent_parts_are_refused_with_the_reason() {
+        let e = refused(|p| p.cluster_table[4] = 2);
+        assert!(e.contains("names cluster 2 of 2"), "{e}");
+        let e = refused(|p| p.cluster_table.truncate(5));
+        assert!(e.contains("5 cluster table entries for 2 x 3"), "{e}");
+        let e = refused(|p| p.subspaces[1] = flat(2, GmrfModel::constant(0.5)));
+        assert!(e.contains("subspace 1 has 2 gmrf levels"), "{e}");
+        let e = refused(|p| p.subspaces[1] = flat(3, Car2dModel::constant(0.5)));
+        assert!(e.contains("subspace 1 has 3 2dcar levels"), "{e}");
+        let e = refused(|p| p.subspaces[0].representative = (2, 0));
+        assert!(e.contains("representative (2, 0)"), "{e}");
+        let e = refused(|p| p.subspaces.clear());
+        assert!(e.contains("0 subspaces"), "{e}");
+        let e = refused(|p| p.width = 0);
+        assert!(e.contains("image size 0x8"), "{e}");
+        let e = refused(|p| {
+            p.range_map = Some(RangeMap {
+                heights: vec![0.0; 5],
+                rows: 2,
+                cols: 3,
+                step: 1,
+                strength: Vec::new(),
+            })
+        });
+        assert!(e.contains("range map of 5 samples as 2x3"), "{e}");
+    }
+
+    #[test]
+    fn cluster_of_is_checked() {
+        let model = MaterialModel::new(parts()).unwrap();
+        assert_eq!(model.cluster_of(1, 2).unwrap(), 1);
+        assert_eq!(model.cluster_of(1, 0).unwrap(), 1);
+        assert_eq!(model.cluster_of(0, 2).unwrap(), 0);
+        assert!(model.cluster_of(2, 0).is_err());
+        assert!(model.cluster_of(0, 3).is_err());
     }
 }

@@ -4,7 +4,6 @@ mod error;
 pub mod format;
 mod material;
 
+pub use crate::mrf::{AnyLevels, ModelKind};
 pub use error::{ModelError, Result};
-pub use material::{
-    BandMarginals, BandModel, LevelModel, MaterialModel, ModelKind, RangeMap, SubspaceModel,
-};
+pub use material::{BandMarginals, MaterialModel, MaterialParts, RangeMap, SubspaceModel};

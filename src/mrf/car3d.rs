@@ -6,11 +6,12 @@
 use super::Car2dModel;
 use super::car2d::{MARGIN, bounded_sample};
 use super::neighbourhood::{causal, reach};
-use super::noise::{require, standard_normal};
+use super::noise::require;
 use super::torus;
-use super::{Car3dFit, choose_stable, is_flat};
+use super::{BandModel, Fit, Repair, choose_stable, is_flat};
+use crate::model::format::{Parse, Reader, Writer};
 use nalgebra::{DMatrix, Matrix3};
-use ndarray::Array3;
+use ndarray::{Array3, ArrayView3};
 
 /// Channels modelled jointly (RGB).
 pub const D: usize = 3;
@@ -108,10 +109,8 @@ impl Car3dModel {
         Matrix3::from_row_slice(&self.a[9 * k..9 * k + 9])
     }
 
-    /// Fits a `(3, h, w)` band: means removed, statistics accumulated once on the sites of the
-    /// largest feasible order, every order scored by the Bayesian decision function (same sites,
-    /// same prior), the best stable one kept (next best, then shrinkage, if unstable).
-    pub fn fit(band: &Array3<f64>, max_order: usize) -> Car3dFit {
+    /// [`BandModel::fit`].
+    fn fit_joint(band: ArrayView3<f64>, max_order: usize) -> Fit<Self> {
         let (_, h, w) = band.dim();
         let n = (h * w).max(1) as f64;
         let mean: [f64; 3] =
@@ -135,13 +134,13 @@ impl Car3dModel {
             mean,
         };
         if is_flat(mean.iter().fold(0.0, |m, v| m.max(v.abs())), total_var) {
-            return Car3dFit {
+            return Fit {
                 model: Self {
                     sigma: [0.0; 9],
                     ..white
                 },
                 candidates: Vec::new(),
-                repair: None,
+                repairs: Vec::new(),
             };
         }
         let feasible = (1..=max_order.min(MAX_ORDER_3D))
@@ -152,10 +151,10 @@ impl Car3dModel {
             .max()
             .unwrap_or(0);
         if feasible == 0 {
-            return Car3dFit {
+            return Fit {
                 model: white,
                 candidates: Vec::new(),
-                repair: Some("band too small for any neighbourhood: white noise".into()),
+                repairs: vec![Repair::TooSmall],
             };
         }
         let offsets = causal(feasible);
@@ -259,25 +258,8 @@ impl Car3dModel {
         Matrix3::from_diagonal(&s.diagonal().map(|v| v.max(0.0).sqrt()))
     }
 
-    /// A `(3, rows, cols)` sample by the causal recursion with a burn-in margin; the same seed
-    /// and size give the same driving noise for every model.
-    pub fn synthesize(&self, rows: usize, cols: usize, seed: u64, tileable: bool) -> Array3<f64> {
-        let noise = standard_normal(seed, Self::noise_len(rows, cols, tileable));
-        self.synthesize_from(rows, cols, &noise, tileable)
-    }
-
-    /// How many unit Gaussian values [`Car3dModel::synthesize_from`] consumes for a sample of
-    /// this size: three per site, the burn-in margin included.
-    pub fn noise_len(rows: usize, cols: usize, tileable: bool) -> usize {
-        3 * Car2dModel::noise_len(rows, cols, tileable)
-    }
-
-    /// [`Car3dModel::synthesize`] driven by given unit Gaussian `noise`, of at least
-    /// [`Car3dModel::noise_len`] values, three per site in the order the recursion visits them.
-    ///
-    /// # Panics
-    /// If `noise` is shorter than [`Car3dModel::noise_len`].
-    pub fn synthesize_from(
+    /// [`BandModel::synthesize_from`].
+    fn joint_from(
         &self,
         rows: usize,
         cols: usize,
@@ -340,6 +322,55 @@ impl Car3dModel {
     }
 }
 
+/// A `(3, rows, cols)` sample by the causal recursion with a burn-in margin, or (`tileable`)
+/// exactly on the torus; three noise values per site, in the order the recursion visits them.
+impl BandModel for Car3dModel {
+    const NAME: &'static str = "3dcar";
+    const PLANES: usize = D;
+
+    /// Fits a `(3, h, w)` band: means removed, statistics accumulated once on the sites of the
+    /// largest feasible order (at most [`MAX_ORDER_3D`]), every order scored by the Bayesian
+    /// decision function (same sites, same prior), the best stable one kept (next best, then
+    /// shrinkage, if unstable).
+    fn fit(band: ArrayView3<f64>, max_order: usize) -> Fit<Self> {
+        Self::fit_joint(band, max_order)
+    }
+
+    fn noise_len(rows: usize, cols: usize, tileable: bool) -> usize {
+        D * Car2dModel::noise_len(rows, cols, tileable)
+    }
+
+    fn synthesize_from(
+        &self,
+        rows: usize,
+        cols: usize,
+        noise: &[f32],
+        tileable: bool,
+    ) -> Array3<f64> {
+        self.joint_from(rows, cols, noise, tileable)
+    }
+
+    fn write(&self, w: &mut Writer) {
+        w.u8(self.order);
+        w.f32s(&self.mean);
+        w.f32s(&self.sigma);
+        w.f32s(&self.a);
+    }
+
+    fn read(r: &mut Reader) -> Parse<Self> {
+        let order = r.u8_at_most(MAX_ORDER_3D, "neighbourhood order")?;
+        let mean: [f64; 3] = r.f32s(3)?.try_into().expect("3");
+        let sigma: [f64; 9] = r.f32s(9)?.try_into().expect("9");
+        let a = r.f32s(9 * causal(usize::from(order)).len())?;
+        Ok(Self {
+            order,
+            a,
+            sigma,
+            mean,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -381,7 +412,7 @@ mod tests {
     #[test]
     fn estimates_recover_matrices_and_noise_covariance() {
         let y = truth().synthesize(300, 300, 4, false);
-        let fit = Car3dModel::fit(&y, 4);
+        let fit = Car3dModel::fit(y.view(), 4);
         assert_eq!(fit.model.order, 1, "{:?}", fit.candidates);
         for (e, t) in fit.model.a.iter().zip(&truth().a) {
             assert!((e - t).abs() < 0.03, "{:?}", fit.model.a);
@@ -389,13 +420,13 @@ mod tests {
         for (e, t) in fit.model.sigma.iter().zip(&truth().sigma) {
             assert!((e - t).abs() < 0.06, "{:?}", fit.model.sigma);
         }
-        assert!(fit.repair.is_none());
+        assert!(fit.repairs.is_empty());
     }
 
     #[test]
     fn constant_and_tiny_bands_give_finite_models() {
         let flat = Array3::from_elem((3, 8, 8), 0.3);
-        let fit = Car3dModel::fit(&flat, 4);
+        let fit = Car3dModel::fit(flat.view(), 4);
         assert_eq!(fit.model.order, 0);
         assert!(
             fit.model
@@ -404,7 +435,7 @@ mod tests {
                 .all(|v| (v - 0.3).abs() < 1e-12)
         );
         let tiny = truth().synthesize(4, 4, 2, false);
-        let fit = Car3dModel::fit(&tiny, 4);
+        let fit = Car3dModel::fit(tiny.view(), 4);
         assert!(
             fit.model
                 .synthesize(8, 8, 1, false)

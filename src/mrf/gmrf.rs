@@ -5,13 +5,14 @@
 //! `sigma^2 / (1 - 2 sum_s gamma_s cos(omega . s))` stays positive, with a repair by shrinkage.
 
 use nalgebra::{DMatrix, DVector};
-use ndarray::Array2;
+use ndarray::{Array2, Array3, ArrayView3, Axis};
 use rustfft::num_complex::Complex32;
 
 use super::neighbourhood::{MAX_ORDER, causal};
-use super::noise::{require, standard_normal};
-use super::{GmrfFit, is_flat};
+use super::noise::require;
+use super::{BandModel, Fit, Repair, is_flat};
 use crate::fft;
+use crate::model::format::{Parse, Reader, Writer};
 
 /// (sin, cos) of `omega_k * s` for every frequency index k along one axis.
 type SinCos = Vec<(f64, f64)>;
@@ -113,17 +114,17 @@ impl GmrfModel {
     /// Fits a band: mean removed, every order up to `max_order` estimated by least squares on
     /// the torus, the best by `t ln sigma^2 + eta ln t` kept, and shrunk if its spectrum is not
     /// positive on a fine frequency grid.
-    pub fn fit(band: &Array2<f64>, max_order: usize) -> GmrfFit {
+    fn fit_plane(band: &Array2<f64>, max_order: usize) -> Fit<Self> {
         let (h, w) = band.dim();
         let t = (h * w).max(1);
         let mean = band.iter().sum::<f64>() / t as f64;
         let y = band.mapv(|v| v - mean);
         let var = y.iter().map(|v| v * v).sum::<f64>() / t as f64;
         if is_flat(mean.abs(), var) {
-            return GmrfFit {
+            return Fit {
                 model: Self::constant(mean),
                 candidates: Vec::new(),
-                repair: None,
+                repairs: Vec::new(),
             };
         }
         let mut candidates = Vec::new();
@@ -155,7 +156,7 @@ impl GmrfModel {
             }
         }
         let Some((_, model)) = best else {
-            return GmrfFit {
+            return Fit {
                 model: Self {
                     order: 0,
                     gamma: Vec::new(),
@@ -163,10 +164,11 @@ impl GmrfModel {
                     mean,
                 },
                 candidates,
-                repair: Some("band too small for any neighbourhood: white noise".into()),
+                repairs: vec![Repair::TooSmall],
             };
         };
-        let (model, mut repair) = model.made_valid(64, 64);
+        let (model, repair) = model.made_valid(64, 64);
+        let mut repairs: Vec<Repair> = repair.into_iter().collect();
         // A valid spectrum can still be nearly singular at low frequencies (a near-unit-root
         // estimate), which paints huge blotches over an enlargement: shrink until the model's
         // variance is within 4x the data's.
@@ -180,22 +182,18 @@ impl GmrfModel {
                     hi = mid;
                 }
             }
-            let note = format!(
-                "variance {:.3}x the data's; shrank gamma by {lo:.3}",
-                model.variance(64, 64) / var
-            );
-            repair = Some(match repair {
-                Some(r) => format!("{r}; {note}"),
-                None => note,
+            repairs.push(Repair::VarianceShrunk {
+                ratio: model.variance(64, 64) / var,
+                factor: lo,
             });
             model.scaled(lo)
         } else {
             model
         };
-        GmrfFit {
+        Fit {
             model,
             candidates,
-            repair,
+            repairs,
         }
     }
 
@@ -253,48 +251,53 @@ impl GmrfModel {
     }
 
     /// The model with its spectrum positive on a `rows` x `cols` grid: unchanged if it is,
-    /// else gamma shrunk so that the smallest denominator is [`MU_FLOOR`]; the note says what
-    /// was done.
-    pub fn made_valid(&self, rows: usize, cols: usize) -> (Self, Option<String>) {
+    /// else gamma shrunk so that the smallest denominator is [`MU_FLOOR`], with that repair.
+    pub fn made_valid(&self, rows: usize, cols: usize) -> (Self, Option<Repair>) {
         let mut mu = self.denominators(rows.max(1), cols.max(1));
         match floor_spectrum(&mut mu) {
             None => (self.clone(), None),
-            Some((min, kappa)) => (
-                self.scaled(kappa),
-                Some(format!(
-                    "spectrum not positive (min {min:.3}); shrank gamma by {kappa:.3}"
-                )),
+            Some((min, factor)) => (
+                self.scaled(factor),
+                Some(Repair::SpectrumFloored { min, factor }),
             ),
         }
     }
 
-    /// An exact sample on the `rows` x `cols` torus (it tiles seamlessly): white noise shaped
-    /// by `sqrt(sigma^2 / mu)` in the frequency domain. The same seed and size give the same
-    /// driving noise for every model (coherent subspaces).
-    pub fn synthesize(&self, rows: usize, cols: usize, seed: u64) -> Array2<f64> {
-        self.synthesize_from(
-            rows,
-            cols,
-            &standard_normal(seed, Self::noise_len(rows, cols)),
-        )
+    /// The stationary variance of the model on a `rows` x `cols` torus:
+    /// `(1 / MN) sum_k sigma^2 / mu_k`.
+    pub fn variance(&self, rows: usize, cols: usize) -> f64 {
+        let mu = self.made_valid(rows, cols).0.denominators(rows, cols);
+        mu.iter().map(|m| self.sigma2 / m).sum::<f64>() / mu.len() as f64
+    }
+}
+
+/// Always an exact sample on the torus (it tiles seamlessly, `tileable` or not): white noise
+/// shaped by `sqrt(sigma^2 / mu)` in the frequency domain; the noise is frequency-domain pairs
+/// in raster order of the bins.
+impl BandModel for GmrfModel {
+    const NAME: &'static str = "gmrf";
+    const PLANES: usize = 1;
+
+    fn fit(band: ArrayView3<f64>, max_order: usize) -> Fit<Self> {
+        Self::fit_plane(&band.index_axis(Axis(0), 0).to_owned(), max_order)
     }
 
-    /// How many unit Gaussian values [`GmrfModel::synthesize_from`] consumes: two (real and
-    /// imaginary part) per frequency bin.
-    pub fn noise_len(rows: usize, cols: usize) -> usize {
+    /// Two values (real and imaginary part) per frequency bin.
+    fn noise_len(rows: usize, cols: usize, _tileable: bool) -> usize {
         2 * rows * cols
     }
 
-    /// [`GmrfModel::synthesize`] driven by given unit Gaussian `noise` (frequency-domain
-    /// pairs in raster order of the bins), of at least [`GmrfModel::noise_len`] values.
-    ///
-    /// # Panics
-    /// If `noise` is shorter than [`GmrfModel::noise_len`].
-    pub fn synthesize_from(&self, rows: usize, cols: usize, noise: &[f32]) -> Array2<f64> {
-        let needed = Self::noise_len(rows, cols);
+    fn synthesize_from(
+        &self,
+        rows: usize,
+        cols: usize,
+        noise: &[f32],
+        tileable: bool,
+    ) -> Array3<f64> {
+        let needed = Self::noise_len(rows, cols, tileable);
         require(noise, needed);
         if rows == 0 || cols == 0 {
-            return Array2::zeros((rows, cols));
+            return Array3::zeros((1, rows, cols));
         }
         // Positivity is checked on this very grid, which a different size samples differently.
         let mut mu = self.denominators(rows, cols);
@@ -315,13 +318,21 @@ impl GmrfModel {
             .collect();
         let scale = (2.0 * (rows * cols) as f64).sqrt();
         fft::inverse_real_by_columns(spectrum, rows, cols, |v| v * scale + self.mean)
+            .insert_axis(Axis(0))
     }
 
-    /// The stationary variance of the model on a `rows` x `cols` torus:
-    /// `(1 / MN) sum_k sigma^2 / mu_k`.
-    pub fn variance(&self, rows: usize, cols: usize) -> f64 {
-        let mu = self.made_valid(rows, cols).0.denominators(rows, cols);
-        mu.iter().map(|m| self.sigma2 / m).sum::<f64>() / mu.len() as f64
+    fn write(&self, w: &mut Writer) {
+        super::write_plane_record(w, self.order, self.mean, self.sigma2, &self.gamma);
+    }
+
+    fn read(r: &mut Reader) -> Parse<Self> {
+        let (order, mean, sigma2, gamma) = super::read_plane_record(r)?;
+        Ok(Self {
+            order,
+            gamma,
+            sigma2,
+            mean,
+        })
     }
 }
 
@@ -345,7 +356,7 @@ mod tests {
         let mut mean_sigma = 0.0;
         let runs = 6;
         for seed in 0..runs {
-            let fit = GmrfModel::fit(&m.synthesize(128, 128, seed), 2).model;
+            let fit = GmrfModel::fit(m.synthesize(128, 128, seed, true).view(), 2).model;
             assert_eq!(fit.order, 2);
             for (a, g) in mean_gamma.iter_mut().zip(&fit.gamma) {
                 *a += g / runs as f64;
@@ -365,7 +376,7 @@ mod tests {
             ..truth()
         };
         let expected = m.variance(256, 256);
-        let y = m.synthesize(256, 256, 42);
+        let y = m.synthesize(256, 256, 42, true);
         let var = y.iter().map(|v| v * v).sum::<f64>() / y.len() as f64;
         assert!((var / expected - 1.0).abs() < 0.05, "{var} vs {expected}");
     }
@@ -386,15 +397,17 @@ mod tests {
             .copied()
             .fold(f64::INFINITY, f64::min);
         assert!(min >= MU_FLOOR * 0.999, "{min}");
-        assert!(bad.synthesize(32, 32, 1).iter().all(|v| v.is_finite()));
+        assert!(bad.synthesize(32, 32, 1, true).iter().all(|v| v.is_finite()));
         assert!(truth().made_valid(64, 64).1.is_none());
     }
 
     #[test]
     fn synthesis_is_deterministic_and_tiles() {
         let m = truth();
-        assert_eq!(m.synthesize(20, 30, 3), m.synthesize(20, 30, 3));
-        let y = m.synthesize(64, 64, 3);
+        assert_eq!(m.synthesize(20, 30, 3, true), m.synthesize(20, 30, 3, true));
+        // The torus is the only sample: `tileable` changes nothing.
+        assert_eq!(m.synthesize(20, 30, 3, false), m.synthesize(20, 30, 3, true));
+        let y = m.synthesize(64, 64, 3, true).index_axis_move(Axis(0), 0);
         // Difference across the wrap is like a difference inside.
         let inner: f64 = (0..64).map(|r| (y[[r, 31]] - y[[r, 32]]).powi(2)).sum();
         let seam: f64 = (0..64).map(|r| (y[[r, 63]] - y[[r, 0]]).powi(2)).sum();

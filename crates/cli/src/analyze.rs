@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use btfmrf::analysis::{AnalysisOptions, analyze};
+use btfmrf::analysis::{AnalysisOptions, AnalysisRepair, analyze};
 use btfmrf::btf::Btf;
 use btfmrf::memory;
 use btfmrf::model::{ModelKind, format};
@@ -24,7 +24,7 @@ struct AnalyzeReport<'a> {
     /// The stored range map's size; `None` without one.
     range_map: Option<RangeMapSize>,
     band_marginal_bytes: usize,
-    repairs: &'a [String],
+    repairs: &'a [AnalysisRepair],
     warnings: &'a [String],
 }
 
@@ -125,14 +125,14 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let ratio = btf.raw_bytes() as f64 / model_bytes as f64;
     if args.json {
         emit_json(&AnalyzeReport {
-            model: model.kind.name(),
+            model: model.kind().name(),
             analysis_seconds: seconds,
             model_bytes,
             raw_bytes: btf.raw_bytes(),
             compression_ratio: ratio,
-            clusters: model.subspaces.len(),
+            clusters: model.subspaces().len(),
             levels: model.levels(),
-            range_map: model.range_map.as_ref().map(|r| RangeMapSize {
+            range_map: model.range_map().map(|r| RangeMapSize {
                 rows: r.rows,
                 cols: r.cols,
                 step: r.step,
@@ -152,8 +152,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         emit(format!(
             "wrote {} ({} model, {} subspaces, {} levels): {} for {} raw, 1:{:.0}, in {:.2} s",
             args.out.display(),
-            model.kind,
-            model.subspaces.len(),
+            model.kind(),
+            model.subspaces().len(),
             model.levels(),
             human_bytes(model_bytes),
             human_bytes(btf.raw_bytes()),

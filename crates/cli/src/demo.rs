@@ -144,7 +144,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         format::write(
             model,
             &dir.join("models")
-                .join(format!("{}.btfm", model.kind.name())),
+                .join(format!("{}.btfm", model.kind().name())),
         )?;
     }
 
@@ -200,7 +200,7 @@ fn renders(
     // scene first needs it, at the render size's power of two (at most 1024).
     let side = (args.render_size as usize)
         .next_power_of_two()
-        .clamp(1 << model.levels().max(1).saturating_sub(1), 1024);
+        .clamp(model.min_synthesis_side(), 1024);
     let cache = model.synthesis_cache(&SynthesisOptions {
         rows: side,
         cols: side,
@@ -295,13 +295,13 @@ fn other_material(
 fn model_of(models: &[MaterialModel], kind: ModelKind) -> anyhow::Result<&MaterialModel> {
     models
         .iter()
-        .find(|m| m.kind == kind)
+        .find(|m| m.kind() == kind)
         .with_context(|| format!("no {kind} model was fitted"))
 }
 
 /// A seamless (tileable) enlargement, frontal view, light from 45 degrees.
 fn enlargement(model: &MaterialModel, side: usize, seed: u64) -> anyhow::Result<Array3<f32>> {
-    let step = 1 << (model.levels().max(1) - 1);
+    let step = model.min_synthesis_side();
     let side = side.div_ceil(step) * step;
     let o = SynthesisOptions {
         rows: side,

@@ -159,7 +159,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             memory::render_bytes(
                 width as usize * height as usize,
                 side,
-                model.subspaces.len(),
+                model.subspaces().len(),
             )
         };
         global.check_memory(

@@ -150,8 +150,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         tileable: args.tileable,
     };
     for (what, requested, measured) in [
-        ("view", &args.view, &model.views),
-        ("light", &args.light, &model.lights),
+        ("view", &args.view, model.views()),
+        ("light", &args.light, model.lights()),
     ] {
         for d in requested {
             if let Some(w) = extrapolation_warning(what, d, measured) {
@@ -172,22 +172,22 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             &args.out,
             1,
             subspaces,
-            model.subspaces.len(),
+            model.subspaces().len(),
             seconds,
         )?;
         return Ok(());
     }
     let views = if args.view.is_empty() {
-        model.views.clone()
+        model.views().clone()
     } else {
         DirectionSet::new(args.view.clone())?
     };
     let lights = if args.light.is_empty() {
-        model.lights.clone()
+        model.lights().clone()
     } else {
         DirectionSet::new(args.light.clone())?
     };
-    let total = model.subspaces.len();
+    let total = model.subspaces().len();
     // The subspace images these pairs draw on: exactly what the cache will synthesize.
     let mut needed = std::collections::BTreeSet::new();
     for v in &views {

@@ -453,7 +453,7 @@ fn estimates_bound_the_measured_peaks() {
         s(&dir.path().join("all.zip")),
     ]);
     assert_eq!(code, 0, "{err}");
-    let all = m.subspaces.len();
+    let all = m.subspaces().len();
     check_estimate(
         "synthesize a 256^2 BTF",
         btfmrf::memory::btf_synthesis_bytes(256, 256, all),

@@ -45,18 +45,18 @@ fn opts(size: usize, seed: u64) -> SynthesisOptions {
 #[test]
 fn model_files_round_trip_and_are_small() {
     for m in models() {
-        assert_eq!(m.subspaces.len(), 8);
-        assert_eq!(m.cluster_table.len(), 6561);
+        assert_eq!(m.subspaces().len(), 8);
+        assert_eq!(m.cluster_table().len(), 6561);
         let bytes = format::to_bytes(m);
         assert!(
             bytes.len() < 150 * 1024,
             "{}: {} bytes",
-            m.kind,
+            m.kind(),
             bytes.len()
         );
         let back = format::from_bytes(&bytes, Path::new("m.btfm")).unwrap();
-        assert_eq!(back.kind, m.kind);
-        assert_eq!(back.cluster_table, m.cluster_table);
+        assert_eq!(back.kind(), m.kind());
+        assert_eq!(back.cluster_table(), m.cluster_table());
         // Stored as f32: a second round trip is exact.
         assert_eq!(format::to_bytes(&back), bytes);
     }
@@ -69,8 +69,8 @@ fn synthesis_is_seed_deterministic_any_size_and_lazy() {
         let a = m.synthesize_image(&v, &l, &opts(96, 5)).unwrap();
         let b = m.synthesize_image(&v, &l, &opts(96, 5)).unwrap();
         let c = m.synthesize_image(&v, &l, &opts(96, 6)).unwrap();
-        assert_eq!(a, b, "{}", m.kind);
-        assert_ne!(a, c, "{}", m.kind);
+        assert_eq!(a, b, "{}", m.kind());
+        assert_ne!(a, c, "{}", m.kind());
         assert!(a.iter().all(|x| x.is_finite()));
         let odd = m.synthesize_image(&v, &l, &opts(37, 5)).unwrap();
         assert_eq!(odd.dim(), (3, 37, 37));
@@ -233,13 +233,18 @@ fn cli_analyze_and_synthesize() {
     assert!(err.contains("junk.btfm"), "{err}");
 }
 
+/// The real RTI sets, with the size and fidelity score docs/BENCHMARKS.md quotes for each
+/// (8 clusters, 256x256 synthesis against the measured image under light 10).
 #[test]
 fn real_rti_sets_analyze_and_synthesize() {
-    for (set, kind) in [
-        ("loewenkopf", ModelKind::Gmrf),
-        ("clay-leaf", ModelKind::Car2d),
-        ("loewenkopf", ModelKind::Car3d),
-    ] {
+    // (set, kind, file size in KB, fidelity score) as quoted.
+    let quoted = [
+        ("loewenkopf", ModelKind::Gmrf, 13.3, 1.27),
+        ("clay-leaf", ModelKind::Car2d, 29.9, 0.84),
+        ("loewenkopf", ModelKind::Car3d, 15.5, 0.94),
+    ];
+    let mut misses = Vec::new();
+    for (set, kind, kb, score) in quoted {
         let btf = Btf::open(rti(set)).unwrap();
         let options = AnalysisOptions {
             kind,
@@ -248,8 +253,7 @@ fn real_rti_sets_analyze_and_synthesize() {
         };
         let (model, _) = analyze(&btf, &options, &NoProgress).unwrap();
         let bytes = format::to_bytes(&model);
-        assert!(bytes.len() < 150 * 1024, "{set}: {}", bytes.len());
-        assert!(model.range_map.is_some(), "{set}: photometric stereo ran");
+        assert!(model.range_map().is_some(), "{set}: photometric stereo ran");
         let light = *btf.lights().get(10).unwrap();
         let synth = model
             .synthesize_image(&Direction::new(0.0, 0.0), &light, &opts(256, 1))
@@ -264,7 +268,18 @@ fn real_rti_sets_analyze_and_synthesize() {
             f.structure,
             f.score
         );
+        // Tolerances: the quoted figures are rounded (0.05 KB, 0.005); beyond that, a changed
+        // neighbourhood choice moves the size by tens of bytes, and floating-point summation
+        // order the score in its third decimal.
+        let size_kb = bytes.len() as f64 / 1024.0;
+        if (size_kb - kb).abs() > 0.3 || (f.score - score).abs() > 0.03 {
+            misses.push(format!(
+                "{set} {kind}: {size_kb:.2} KB, score {:.3}; docs quote {kb} KB, {score}",
+                f.score
+            ));
+        }
     }
+    assert!(misses.is_empty(), "{misses:#?}");
 }
 
 /// Mean squared difference between horizontally adjacent pixels: across the wrap (last column
@@ -292,13 +307,13 @@ fn tileable_images_wrap_seamlessly() {
         let (seam, interior) = seam_and_interior(&tiled);
         println!(
             "{}: tileable seam {seam:.5} vs interior {interior:.5}",
-            m.kind
+            m.kind()
         );
-        if m.kind == ModelKind::Gmrf {
+        if m.kind() == ModelKind::Gmrf {
             // Exact torus sample, periodic pyramid, pointwise colour maps, periodic relief.
             assert!(seam < 2.0 * interior, "{seam} vs {interior}");
         } else {
-            assert!(seam < 3.0 * interior, "{}: {seam} vs {interior}", m.kind);
+            assert!(seam < 3.0 * interior, "{}: {seam} vs {interior}", m.kind());
         }
     }
 }
@@ -317,7 +332,7 @@ fn synthesis_at_4096_squared() {
             )
             .unwrap();
         assert_eq!(im.dim(), (3, 4096, 4096));
-        assert!(im.iter().all(|v| v.is_finite()), "{}", m.kind);
+        assert!(im.iter().all(|v| v.is_finite()), "{}", m.kind());
     }
 }
 
@@ -331,12 +346,17 @@ fn a_cache_shares_noise_without_changing_any_image() {
                 tileable,
                 ..opts(48, 5)
             };
-            let all: Vec<usize> = (0..model.subspaces.len()).collect();
+            let all: Vec<usize> = (0..model.subspaces().len()).collect();
             let cache = model.synthesis_cache_for(&all, &o).unwrap();
             assert_eq!(cache.synthesized(), all.len());
             for &k in &all {
                 let alone = model.synthesize_subspace(k, &o).unwrap();
-                assert_eq!(cache.get(k), Some(&alone), "{:?} subspace {k}", model.kind);
+                assert_eq!(
+                    cache.get(k),
+                    Some(&alone),
+                    "{:?} subspace {k}",
+                    model.kind()
+                );
             }
         }
     }

@@ -174,15 +174,16 @@ fn gpu_equals_the_cpu_reference_on_a_flat_plane() {
 #[test]
 fn the_gpu_applies_the_measured_bump_strength_per_light() {
     let Some(renderer) = renderer() else { return };
-    let mut model = golden_model();
-    let lights = model.lights.len();
-    let map = model
+    let mut parts = golden_model().into_parts();
+    let lights = parts.lights.len();
+    let map = parts
         .range_map
         .as_mut()
         .expect("the golden model has a range map");
     // Weak relief under some lights, none under others, full under the rest (as fitted on
     // real captures, where the Lambertian ratio overstates low lights).
     map.strength = (0..lights).map(|l| [0.15, 0.0, 0.6, 1.0][l % 4]).collect();
+    let model = MaterialModel::new(parts).unwrap();
     let lights = [
         Direction::new(45.0, 60.0),
         Direction::new(37.0, 100.0),
@@ -194,11 +195,11 @@ fn the_gpu_applies_the_measured_bump_strength_per_light() {
 #[test]
 fn lights_below_the_horizon_clamp_at_the_sets_lowest_light_as_on_the_cpu() {
     let Some(renderer) = renderer() else { return };
-    let mut model = golden_model();
+    let mut parts = golden_model().into_parts();
     // An RTI dome that lists its last ring 5 degrees below the horizon; a light 3 degrees
     // below it still lights the plane, interpolated among the lowest lights as on the CPU
     // (the relief's shading is left out: below the horizon it leaves the image as it is).
-    let moved: Vec<Direction> = model
+    let moved: Vec<Direction> = parts
         .lights
         .iter()
         .map(|d| {
@@ -210,8 +211,9 @@ fn lights_below_the_horizon_clamp_at_the_sets_lowest_light_as_on_the_cpu() {
             Direction::new(theta, d.phi_deg)
         })
         .collect();
-    model.lights = btfmrf::btf::DirectionSet::new(moved).unwrap();
-    model.range_map = None;
+    parts.lights = btfmrf::btf::DirectionSet::new(moved).unwrap();
+    parts.range_map = None;
+    let model = MaterialModel::new(parts).unwrap();
     let lights = [Direction::new(93.0, 30.0), Direction::new(60.0, 200.0)];
     assert_gpu_matches_cpu(&renderer, &model, "below-horizon", &lights);
 }

@@ -28,7 +28,7 @@ fn frames(c: &mut Criterion) {
     )
     .expect("the golden model");
     let n = 512;
-    let all: Vec<usize> = (0..model.subspaces.len()).collect();
+    let all: Vec<usize> = (0..model.subspaces().len()).collect();
     let cache = model
         .synthesis_cache_for(
             &all,

@@ -155,8 +155,8 @@ impl<'a> MrfJob<'a> {
             scene,
             mapping,
             luts: (
-                DirectionLut::new(&model.views)?,
-                DirectionLut::new(&model.lights)?,
+                DirectionLut::new(model.views())?,
+                DirectionLut::new(model.lights())?,
             ),
             start,
         })
@@ -386,7 +386,7 @@ impl Renderer {
                 texels_synthesized: (synthesized * rows * cols) as u64,
                 plan,
                 tile: rows,
-                subspaces_total: model.subspaces.len(),
+                subspaces_total: model.subspaces().len(),
                 synthesis_seconds,
             },
             render_seconds: start.elapsed().as_secs_f64(),

@@ -69,20 +69,23 @@ impl MaterialTables {
         let (view_lut, light_lut) = match luts {
             Some(l) => l,
             None => (
-                DirectionLut::new(&model.views)?,
-                DirectionLut::new(&model.lights)?,
+                DirectionLut::new(model.views())?,
+                DirectionLut::new(model.lights())?,
             ),
         };
-        let clusters: Vec<usize> = (0..model.subspaces.len())
+        let clusters: Vec<usize> = (0..model.subspaces().len())
             .filter(|&k| cache.get(k).is_some())
             .collect();
-        let mut layer_of = vec![u32::MAX; model.subspaces.len()];
+        let mut layer_of = vec![u32::MAX; model.subspaces().len()];
         for (layer, &k) in clusters.iter().enumerate() {
             layer_of[k] = layer as u32;
         }
-        let (nv, nl) = (model.views.len(), model.lights.len());
-        let pair_layer = (0..nv * nl)
-            .map(|i| layer_of[model.cluster_of(i / nl, i % nl)])
+        let (nv, nl) = (model.views().len(), model.lights().len());
+        // The cluster table is view-major, like the pair layers.
+        let pair_layer = model
+            .cluster_table()
+            .iter()
+            .map(|&c| layer_of[usize::from(c)])
             .collect();
         Ok(Self {
             size: cache.options().rows,
@@ -94,7 +97,7 @@ impl MaterialTables {
             light_lut,
             mean_shading: cache.normals().map(MeanShading::new),
             light_strength: (0..nl)
-                .map(|l| model.range_map.as_ref().map_or(1.0, |m| m.strength_of(l)) as f32)
+                .map(|l| model.range_map().map_or(1.0, |m| m.strength_of(l)) as f32)
                 .collect(),
         })
     }

@@ -57,7 +57,6 @@ pub fn plan_scene(
         c[3] > 0.0 && c[0].abs() <= 1.05 * c[3] && c[1].abs() <= 1.05 * c[3] && c[2] >= 0.0
     };
     let mut clusters = BTreeSet::new();
-    let nl = model.lights.len();
     let mut sample = |p: [f32; 3], n: [f32; 3], tangent: [f32; 4]| {
         let t = [tangent[0], tangent[1], tangent[2]];
         let b = {
@@ -88,7 +87,8 @@ pub fn plan_scene(
         for a in 0..3 {
             for c in 0..3 {
                 if vw[a] * lw[c] > 0.0 {
-                    clusters.insert(usize::from(model.cluster_table[vi[a] * nl + li[c]]));
+                    let k = model.cluster_of(vi[a], li[c]);
+                    clusters.insert(k.expect("the lookup tables index the model's directions"));
                 }
             }
         }
@@ -159,30 +159,44 @@ mod tests {
     use super::*;
     use crate::scene::{Camera, Light, Projection};
     use btfmrf::btf::{Direction, DirectionSet};
+    use btfmrf::decompose::marginals::{QUANTILES, QuantileGrid};
+    use btfmrf::decompose::{ColourSpace, KlBasis};
+    use btfmrf::model::{MaterialParts, SubspaceModel};
+    use btfmrf::mrf::{Car2dModel, Levels};
 
-    /// A model skeleton whose cluster of a pair is `light index % 4` (no band models: the
-    /// plan reads only the directions and the cluster table).
+    /// A model skeleton whose cluster of a pair is `light index % 4` (constant band models:
+    /// the plan reads only the directions and the cluster table).
     fn skeleton() -> MaterialModel {
         let (views, lights) = (DirectionSet::bonn(), DirectionSet::bonn());
         let cluster_table = (0..81 * 81).map(|i| (i % 81 % 4) as u16).collect();
-        MaterialModel {
-            kind: btfmrf::model::ModelKind::Car2d,
+        let flat = SubspaceModel {
+            representative: (0, 0),
+            kl: KlBasis::identity(ColourSpace::LinearRgb),
+            marginals: [[0.0; QUANTILES]; 3],
+            marginal_grid: QuantileGrid::Uniform,
+            levels: Levels::new(vec![vec![Car2dModel::constant(0.0); 3]])
+                .unwrap()
+                .into(),
+            band_marginals: None,
+        };
+        MaterialModel::new(MaterialParts {
             views,
             lights,
             width: 64,
             height: 64,
             cluster_table,
-            subspaces: Vec::new(),
+            subspaces: vec![flat; 4],
             range_map: None,
-        }
+        })
+        .unwrap()
     }
 
     #[test]
     fn a_flat_plane_under_one_view_and_light_needs_the_cpu_clusters_only() {
         let model = skeleton();
         let luts = (
-            DirectionLut::new(&model.views).unwrap(),
-            DirectionLut::new(&model.lights).unwrap(),
+            DirectionLut::new(model.views()).unwrap(),
+            DirectionLut::new(model.lights()).unwrap(),
         );
         let light = Direction::new(45.0, 30.0);
         let scene = Scene {

@@ -132,7 +132,7 @@ impl App<'_> {
         surface.configure(&ctx.device, &config);
         let pass = MrfPass::new(&ctx, format)?;
         let model = self.model;
-        let all: Vec<usize> = (0..model.subspaces.len()).collect();
+        let all: Vec<usize> = (0..model.subspaces().len()).collect();
         let n = o.tile;
         let cache = model.synthesis_cache_for(
             &all,
