@@ -227,15 +227,7 @@ fn renders(
             };
             let mesh = kind.build(detail, 1.0)?;
             for (theta, phi) in RENDER_LIGHTS {
-                let scene = Scene {
-                    camera: Camera::orbit(Direction::new(35.0, 270.0), 4.2),
-                    light: Light {
-                        direction: Direction::new(theta, phi),
-                        distance: Some(4.0),
-                    },
-                    width: args.render_size,
-                    height: args.render_size,
-                };
+                let scene = demo_scene(theta, phi, args.render_size);
                 let r = renderer.render_cached(model, &cache, &mesh, &scene, mapping)?;
                 let name = format!("renders/{kind}-{mapping}-light{theta:.0}-{phi:.0}.png");
                 io::write_image(&dir.join(&name), &r.image)?;
@@ -257,15 +249,7 @@ fn renders(
         let repeats = (side as f32 / lpca.width().max(1) as f32).max(1.0);
         let mesh = MeshKind::Sphere.build(64, repeats)?;
         for (theta, phi) in RENDER_LIGHTS {
-            let scene = Scene {
-                camera: Camera::orbit(Direction::new(35.0, 270.0), 4.2),
-                light: Light {
-                    direction: Direction::new(theta, phi),
-                    distance: Some(4.0),
-                },
-                width: args.render_size,
-                height: args.render_size,
-            };
+            let scene = demo_scene(theta, phi, args.render_size);
             let r = renderer.render_lpca(lpca, &mesh, &scene)?;
             let name = format!("renders/sphere-lpca-light{theta:.0}-{phi:.0}.png");
             io::write_image(&dir.join(&name), &r.image)?;
@@ -415,4 +399,18 @@ fn report(args: &Args, bench: &str, enlarged_file: &str, start: Instant) -> Stri
     md.push_str("## Speed against error\n\n");
     md.push_str(bench);
     md
+}
+
+/// The demo's render set-up: camera at 35 deg elevation, a point light at (`theta`, `phi`)
+/// 4 units away, a `size` x `size` image.
+fn demo_scene(theta: f64, phi: f64, size: u32) -> Scene {
+    Scene {
+        camera: Camera::orbit(Direction::new(35.0, 270.0), 4.2),
+        light: Light {
+            direction: Direction::new(theta, phi),
+            distance: Some(4.0),
+        },
+        width: size,
+        height: size,
+    }
 }

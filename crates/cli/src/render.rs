@@ -1,6 +1,6 @@
 //! `btfmrf render`: a model on a mesh, rendered headless by the GPU (or Mesa lavapipe) to PNG.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use btfmrf::btf::{Direction, io};
@@ -13,7 +13,7 @@ use btfmrf_render::{
 };
 
 use super::synthesize::{parse_direction, parse_size};
-use super::{Global, emit};
+use super::{Global, emit, emit_json};
 
 /// Render a model on a mesh to an image, headless (works without a GPU through Mesa's
 /// software Vulkan driver, lavapipe).
@@ -184,37 +184,36 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     };
     io::write_image(&args.out, &out.image)
         .with_context(|| format!("writing {}", args.out.display()))?;
-    let common = serde_json::json!({
-        "out": args.out,
-        "adapter": out.adapter,
-        "mesh": args.mesh.to_string(),
-        "width": width,
-        "height": height,
-        "render_seconds": out.render_seconds,
-    });
+    if args.json {
+        let material = match &out.stats {
+            RenderStats::Mrf(s) => MaterialReport::Mrf {
+                mapping: mapping.name(),
+                texture_size: s.plan.texture_size,
+                tile: s.tile,
+                clusters: &s.plan.clusters,
+                subspaces_synthesized: s.subspaces_synthesized,
+                subspaces_total: s.subspaces_total,
+                texels_synthesized: s.texels_synthesized,
+                synthesis_seconds: s.synthesis_seconds,
+            },
+            RenderStats::Lpca(s) => MaterialReport::Lpca {
+                method: s.method.name(),
+                clusters: s.clusters,
+                model_width: s.size.0,
+                model_height: s.size.1,
+            },
+        };
+        return emit_json(&RenderReport {
+            out: &args.out,
+            adapter: &out.adapter,
+            mesh: args.mesh.to_string(),
+            width,
+            height,
+            render_seconds: out.render_seconds,
+            material,
+        });
+    }
     match &out.stats {
-        RenderStats::Mrf(s) if args.json => {
-            let mut report = common;
-            report["material"] = "mrf".into();
-            report["mapping"] = mapping.name().into();
-            report["texture_size"] = s.plan.texture_size.into();
-            report["tile"] = s.tile.into();
-            report["clusters"] = s.plan.clusters.clone().into();
-            report["subspaces_synthesized"] = s.subspaces_synthesized.into();
-            report["subspaces_total"] = s.subspaces_total.into();
-            report["texels_synthesized"] = s.texels_synthesized.into();
-            report["synthesis_seconds"] = s.synthesis_seconds.into();
-            emit(report)
-        }
-        RenderStats::Lpca(s) if args.json => {
-            let mut report = common;
-            report["material"] = "lpca".into();
-            report["method"] = s.method.name().into();
-            report["clusters"] = s.clusters.into();
-            report["model_width"] = s.size.0.into();
-            report["model_height"] = s.size.1.into();
-            emit(report)
-        }
         RenderStats::Mrf(s) => emit(format!(
             "wrote {} ({}x{}, {} on {}; {} of {} subspace images synthesized at {}^2 in {:.3} s, sampled at {}^2, rendered in {:.3} s)",
             args.out.display(),
@@ -242,4 +241,39 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             out.render_seconds
         )),
     }
+}
+
+/// `render --json`: the frame, then what its material needed.
+#[derive(serde::Serialize)]
+struct RenderReport<'a> {
+    out: &'a Path,
+    adapter: &'a str,
+    mesh: String,
+    width: u32,
+    height: u32,
+    render_seconds: f64,
+    #[serde(flatten)]
+    material: MaterialReport<'a>,
+}
+
+/// The material's part of [`RenderReport`], tagged `"material": "mrf" | "lpca"`.
+#[derive(serde::Serialize)]
+#[serde(tag = "material", rename_all = "lowercase")]
+enum MaterialReport<'a> {
+    Mrf {
+        mapping: &'static str,
+        texture_size: usize,
+        tile: usize,
+        clusters: &'a [usize],
+        subspaces_synthesized: usize,
+        subspaces_total: usize,
+        texels_synthesized: u64,
+        synthesis_seconds: f64,
+    },
+    Lpca {
+        method: &'static str,
+        clusters: usize,
+        model_width: usize,
+        model_height: usize,
+    },
 }

@@ -177,16 +177,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         )?;
         return Ok(());
     }
-    let views = if args.view.is_empty() {
-        model.views().clone()
-    } else {
-        DirectionSet::new(args.view.clone())?
-    };
-    let lights = if args.light.is_empty() {
-        model.lights().clone()
-    } else {
-        DirectionSet::new(args.light.clone())?
-    };
+    let views = requested(&args.view, model.views())?;
+    let lights = requested(&args.light, model.lights())?;
     let total = model.subspaces().len();
     // The subspace images these pairs draw on: exactly what the cache will synthesize.
     let mut needed = std::collections::BTreeSet::new();
@@ -268,16 +260,8 @@ fn run_lpca(model: lpca::LpcaModel, args: Args, global: &Global) -> anyhow::Resu
         let btf = if args.view.is_empty() && args.light.is_empty() {
             model.into_btf()?
         } else {
-            let views = if args.view.is_empty() {
-                model.views().clone()
-            } else {
-                DirectionSet::new(args.view.clone())?
-            };
-            let lights = if args.light.is_empty() {
-                model.lights().clone()
-            } else {
-                DirectionSet::new(args.light.clone())?
-            };
+            let views = requested(&args.view, model.views())?;
+            let lights = requested(&args.light, model.lights())?;
             LpcaImages::into_btf(model, views, lights)?
         };
         io::write_btf(
@@ -333,6 +317,15 @@ fn single_pair(args: &Args) -> anyhow::Result<Option<(&Direction, &Direction)>> 
             args.out.display()
         ),
     }
+}
+
+/// The directions asked for with `--view` / `--light`, or all the model's measured ones.
+fn requested(given: &[Direction], measured: &DirectionSet) -> anyhow::Result<DirectionSet> {
+    Ok(if given.is_empty() {
+        measured.clone()
+    } else {
+        DirectionSet::new(given.to_vec())?
+    })
 }
 
 #[cfg(test)]
