@@ -126,7 +126,7 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
                 .heights
                 .iter()
                 .fold((f32::MAX, f32::MIN), |(a, b), &h| (a.min(h), b.max(h)));
-            let step = if hi > lo { (hi - lo) / 65535.0 } else { 0.0 };
+            let step = quantum(lo, hi);
             w.f32(f64::from(lo));
             w.f32(f64::from(step));
             for &h in &r.heights {
@@ -191,6 +191,14 @@ pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
     tables * (8 + 2 * BAND_QUANTILES)
 }
 
+/// The step of 65535 codes from `lo` to `hi`; 0 (every code decodes to `lo`) when the range
+/// is empty or the step would be subnormal: single precision cannot hold such a step, and the
+/// decoded values would quantise to other codes when written again (cargo-fuzz found it).
+fn quantum(lo: f32, hi: f32) -> f32 {
+    let q = (hi - lo) / 65535.0;
+    if hi > lo && q.is_normal() { q } else { 0.0 }
+}
+
 /// Non-decreasing values as `f32` low, `f32` quantum and one `u16` code each (rounding is
 /// monotone, so the decoded table stays non-decreasing).
 fn write_quantised(w: &mut Writer, values: &[f64]) {
@@ -198,7 +206,7 @@ fn write_quantised(w: &mut Writer, values: &[f64]) {
         .iter()
         .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
     let (lo, hi) = (lo as f32, hi as f32);
-    let quantum = if hi > lo { (hi - lo) / 65535.0 } else { 0.0 };
+    let quantum = quantum(lo, hi);
     w.f32(f64::from(lo));
     w.f32(f64::from(quantum));
     for &v in values {
@@ -436,4 +444,19 @@ pub fn read(path: &Path) -> Result<MaterialModel> {
     let limit = u64::from(MAX_PAYLOAD) + envelope::OVERHEAD as u64;
     let bytes = crate::io::read_capped(path, limit).map_err(BtfError::from)?;
     from_bytes(&bytes, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quanta_too_small_for_single_precision_mean_a_flat_table() {
+        assert_eq!(quantum(0.0, 65535.0), 1.0);
+        assert_eq!(quantum(1.0, 1.0), 0.0);
+        assert_eq!(quantum(2.0, 1.0), 0.0);
+        // Heights around 1e-36 apart give a subnormal step: written as flat.
+        assert_eq!(quantum(6.1e-36, 7.0e-36), 0.0);
+        assert!(quantum(0.0, 1e-30).is_normal());
+    }
 }
