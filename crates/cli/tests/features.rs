@@ -100,7 +100,8 @@ fn a_relit_copy_is_matched_to_its_own_photograph_through_the_cli() {
         assert_eq!(report["length"].as_u64().unwrap() as usize, v.len());
         assert_eq!(report["names"].as_array().unwrap().len(), v.len());
         assert_eq!(report["invariance"].as_array().unwrap().len(), v.len());
-        assert!(report["seconds"].as_f64().unwrap() > 0.0);
+        // Reported as a number; a time is not asserted.
+        assert!(report["seconds"].as_f64().is_some_and(f64::is_finite));
         assert_eq!(v.len(), FeatureOptions::default().len());
         database.push(v);
     }

@@ -545,8 +545,17 @@ fn the_render_command_reports_what_it_synthesized() {
         report["texels_synthesized"].as_u64().unwrap(),
         used * side * side
     );
-    assert!(report["render_seconds"].as_f64().unwrap() > 0.0);
-    assert!(report["synthesis_seconds"].as_f64().unwrap() > 0.0);
+    // Reported as a number; a time is not asserted.
+    assert!(
+        report["render_seconds"]
+            .as_f64()
+            .is_some_and(f64::is_finite)
+    );
+    assert!(
+        report["synthesis_seconds"]
+            .as_f64()
+            .is_some_and(f64::is_finite)
+    );
     let image = io::read_image(&out).unwrap();
     assert_eq!(image.dim(), (3, 64, 96));
 
