@@ -191,12 +191,21 @@ pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
     tables * (8 + 2 * BAND_QUANTILES)
 }
 
+/// Ranges narrower than this are written as flat tables: heights in texels and factor
+/// quantiles that close together are equal for every use, and steps near the subnormal range
+/// lose the precision a code needs (cargo-fuzz found decoded values re-quantising to other
+/// codes, so write-read-write was not a fixed point).
+const FLAT_RANGE: f32 = 1e-20;
+
 /// The step of 65535 codes from `lo` to `hi`; 0 (every code decodes to `lo`) when the range
-/// is empty or the step would be subnormal: single precision cannot hold such a step, and the
-/// decoded values would quantise to other codes when written again (cargo-fuzz found it).
+/// is narrower than [`FLAT_RANGE`] or not finite.
 fn quantum(lo: f32, hi: f32) -> f32 {
     let q = (hi - lo) / 65535.0;
-    if hi > lo && q.is_normal() { q } else { 0.0 }
+    if hi - lo > FLAT_RANGE && q.is_normal() {
+        q
+    } else {
+        0.0
+    }
 }
 
 /// Non-decreasing values as `f32` low, `f32` quantum and one `u16` code each (rounding is
@@ -455,8 +464,10 @@ mod tests {
         assert_eq!(quantum(0.0, 65535.0), 1.0);
         assert_eq!(quantum(1.0, 1.0), 0.0);
         assert_eq!(quantum(2.0, 1.0), 0.0);
-        // Heights around 1e-36 apart give a subnormal step: written as flat.
+        // Heights around 1e-36 or 1e-33 apart (fuzzing's cases): written as flat.
         assert_eq!(quantum(6.1e-36, 7.0e-36), 0.0);
-        assert!(quantum(0.0, 1e-30).is_normal());
+        assert_eq!(quantum(2.37e-38, 1.55e-33), 0.0);
+        assert!(quantum(0.0, 1e-6).is_normal());
+        assert_eq!(quantum(0.0, f32::INFINITY), 0.0);
     }
 }
