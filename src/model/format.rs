@@ -208,6 +208,18 @@ fn quantum(lo: f32, hi: f32) -> f32 {
     }
 }
 
+/// The value of a quantised `code` (see [`write_quantised`]); one beyond single precision is an
+/// error, since the writer could not store it again (cargo-fuzz found a range map decoding to
+/// -inf).
+fn decode(lo: f64, quantum: f64, code: u16, what: &str) -> Parse<f64> {
+    let v = lo + quantum * f64::from(code);
+    if (v as f32).is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("{what} {v:e} is beyond single precision"))
+    }
+}
+
 /// Non-decreasing values as `f32` low, `f32` quantum and one `u16` code each (rounding is
 /// monotone, so the decoded table stays non-decreasing).
 fn write_quantised(w: &mut Writer, values: &[f64]) {
@@ -342,7 +354,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             let (lo, quantum) = (r.f32()?, r.f32()?);
             r.ensure(rows * cols, 2, "range map")?;
             let heights = (0..rows * cols)
-                .map(|_| Ok((lo + quantum * f64::from(r.u16()?)) as f32))
+                .map(|_| Ok(decode(lo, quantum, r.u16()?, "range map height")? as f32))
                 .collect::<Parse<Vec<f32>>>()?;
             let strength = if flag == 2 {
                 let n = usize::from(r.u16()?);
@@ -423,7 +435,7 @@ fn read_colour(r: &mut Reader, subspaces: &mut [SubspaceModel], levels: usize) -
                     return Err(format!("negative band quantile step {quantum}"));
                 }
                 *table = (0..count)
-                    .map(|_| Ok(lo + quantum * f64::from(r.u16()?)))
+                    .map(|_| decode(lo, quantum, r.u16()?, "band quantile"))
                     .collect::<Parse<Vec<f64>>>()?;
                 if table.windows(2).any(|w| w[1] < w[0]) {
                     return Err("band quantile table is not increasing".into());
@@ -469,5 +481,11 @@ mod tests {
         assert_eq!(quantum(2.37e-38, 1.55e-33), 0.0);
         assert!(quantum(0.0, 1e-6).is_normal());
         assert_eq!(quantum(0.0, f32::INFINITY), 0.0);
+    }
+
+    #[test]
+    fn codes_decoding_beyond_single_precision_are_errors() {
+        assert_eq!(decode(1.0, 0.5, 4, "h"), Ok(3.0));
+        assert!(decode(-3.0e38, -1.0e36, 65535, "h").is_err());
     }
 }
