@@ -122,21 +122,8 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
             w.u16(r.rows as u16);
             w.u16(r.cols as u16);
             w.u16(r.step as u16);
-            let (lo, hi) = r
-                .heights
-                .iter()
-                .fold((f32::MAX, f32::MIN), |(a, b), &h| (a.min(h), b.max(h)));
-            let step = quantum(lo, hi);
-            w.f32(f64::from(lo));
-            w.f32(f64::from(step));
-            for &h in &r.heights {
-                let q = if step > 0.0 {
-                    ((h - lo) / step).round()
-                } else {
-                    0.0
-                };
-                w.u16(q as u16);
-            }
+            let heights: Vec<f64> = r.heights.iter().map(|&h| f64::from(h)).collect();
+            write_quantised(&mut w, &heights, Storage::Single);
             if !r.strength.is_empty() {
                 w.u16(r.strength.len() as u16);
                 for &k in &r.strength {
@@ -175,7 +162,7 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
             .iter()
             .flat_map(|b| b.tables.iter().flatten())
         {
-            write_quantised(w, table);
+            write_quantised(w, table, Storage::Double);
         }
     }
 }
@@ -195,16 +182,64 @@ pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
 /// quantiles that close together are equal for every use, and steps near the subnormal range
 /// lose the precision a code needs (cargo-fuzz found decoded values re-quantising to other
 /// codes, so write-read-write was not a fixed point).
-const FLAT_RANGE: f32 = 1e-20;
+const FLAT_RANGE: f64 = 1e-20;
 
-/// The step of 65535 codes from `lo` to `hi`; 0 (every code decodes to `lo`) when the range
-/// is narrower than [`FLAT_RANGE`] or not finite.
-fn quantum(lo: f32, hi: f32) -> f32 {
-    let q = (hi - lo) / 65535.0;
-    if hi - lo > FLAT_RANGE && q.is_normal() {
-        q
+/// The precision a quantised table is held in after reading: band quantiles stay `f64`,
+/// range-map heights are rounded to `f32`. The writer needs it to make write-read-write a
+/// fixed point.
+#[derive(Clone, Copy)]
+enum Storage {
+    Single,
+    Double,
+}
+
+impl Storage {
+    /// A decoded value as the reader keeps it.
+    fn held(self, v: f64) -> f64 {
+        match self {
+            Storage::Single => f64::from(v as f32),
+            Storage::Double => v,
+        }
+    }
+
+    /// The smallest step, relative to the largest magnitude in the table, at which every
+    /// decoded value re-quantises to its own code: a few of the held precision's units.
+    fn resolution(self) -> f64 {
+        match self {
+            Storage::Single => 2f64.powi(-22),
+            Storage::Double => 2f64.powi(-36),
+        }
+    }
+}
+
+/// `low` (code 0) and the step per code for values from `min` to `max`, so that the decoded
+/// table quantises to the same `low`, step and codes again. `low` is `min` rounded up to
+/// `f32`, so the smallest value has code 0 and decodes to `low` exactly; the step is computed
+/// in `f64` from it and, where the held precision rounds the top code's value, moved to the
+/// step that value gives back (one or two moves in practice). Step 0 (a flat table) when the
+/// range is narrower than [`FLAT_RANGE`], finer than the held precision resolves, or not
+/// finite. The cargo-fuzz target btfm_payload found the step computed in `f32` from `f32`
+/// ends moving by one unit on every write.
+fn quantisation(min: f64, max: f64, storage: Storage) -> (f32, f32) {
+    let mut low = min as f32;
+    if f64::from(low) < min {
+        low = low.next_up();
+    }
+    let step_for = |top: f64| ((top - f64::from(low)) / 65535.0) as f32;
+    let mut step = step_for(max);
+    for _ in 0..8 {
+        let again = step_for(storage.held(f64::from(low) + f64::from(step) * 65535.0));
+        if again == step {
+            break;
+        }
+        step = again;
+    }
+    let largest = f64::from(low).abs().max(max.abs());
+    let resolved = f64::from(step) > largest * storage.resolution();
+    if low.is_finite() && max - f64::from(low) > FLAT_RANGE && step.is_normal() && resolved {
+        (low, step)
     } else {
-        0.0
+        (if low.is_finite() { low } else { 0.0 }, 0.0)
     }
 }
 
@@ -220,19 +255,20 @@ fn decode(lo: f64, quantum: f64, code: u16, what: &str) -> Parse<f64> {
     }
 }
 
-/// Non-decreasing values as `f32` low, `f32` quantum and one `u16` code each (rounding is
-/// monotone, so the decoded table stays non-decreasing).
-fn write_quantised(w: &mut Writer, values: &[f64]) {
-    let (lo, hi) = values
+/// Values as `f32` low, `f32` quantum and one `u16` code each, `low + quantum x code` (see
+/// [`quantisation`]); rounding is monotone, so a non-decreasing table stays non-decreasing.
+fn write_quantised(w: &mut Writer, values: &[f64], storage: Storage) {
+    let (min, max) = values
         .iter()
         .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
-    let (lo, hi) = (lo as f32, hi as f32);
-    let quantum = quantum(lo, hi);
-    w.f32(f64::from(lo));
-    w.f32(f64::from(quantum));
+    let (low, step) = quantisation(min, max, storage);
+    w.f32(f64::from(low));
+    w.f32(f64::from(step));
     for &v in values {
-        let code = if quantum > 0.0 {
-            ((v as f32 - lo) / quantum).round().clamp(0.0, 65535.0)
+        let code = if step > 0.0 {
+            ((v - f64::from(low)) / f64::from(step))
+                .round()
+                .clamp(0.0, 65535.0)
         } else {
             0.0
         };
@@ -471,16 +507,65 @@ pub fn read(path: &Path) -> Result<MaterialModel> {
 mod tests {
     use super::*;
 
+    /// The bytes [`write_quantised`] writes for `values`.
+    fn quantised(values: &[f64], storage: Storage) -> Vec<u8> {
+        let mut w = Writer(Vec::new());
+        write_quantised(&mut w, values, storage);
+        w.0
+    }
+
+    /// The table those bytes decode to, held as the reader holds it.
+    fn decoded(bytes: &[u8], storage: Storage) -> Vec<f64> {
+        let mut r = Reader::new(bytes);
+        let (lo, step) = (r.f32().unwrap(), r.f32().unwrap());
+        (0..(bytes.len() - 8) / 2)
+            .map(|_| storage.held(decode(lo, step, r.u16().unwrap(), "v").unwrap()))
+            .collect()
+    }
+
     #[test]
-    fn quanta_too_small_for_single_precision_mean_a_flat_table() {
-        assert_eq!(quantum(0.0, 65535.0), 1.0);
-        assert_eq!(quantum(1.0, 1.0), 0.0);
-        assert_eq!(quantum(2.0, 1.0), 0.0);
+    fn quanta_too_small_for_the_held_precision_mean_a_flat_table() {
+        let step = |min, max, storage| quantisation(min, max, storage).1;
+        assert_eq!(quantisation(0.0, 65535.0, Storage::Double), (0.0, 1.0));
+        assert_eq!(step(1.0, 1.0, Storage::Double), 0.0);
+        assert_eq!(step(2.0, 1.0, Storage::Double), 0.0);
         // Heights around 1e-36 or 1e-33 apart (fuzzing's cases): written as flat.
-        assert_eq!(quantum(6.1e-36, 7.0e-36), 0.0);
-        assert_eq!(quantum(2.37e-38, 1.55e-33), 0.0);
-        assert!(quantum(0.0, 1e-6).is_normal());
-        assert_eq!(quantum(0.0, f32::INFINITY), 0.0);
+        assert_eq!(step(6.1e-36, 7.0e-36, Storage::Single), 0.0);
+        assert_eq!(step(2.37e-38, 1.55e-33, Storage::Single), 0.0);
+        assert!(step(0.0, 1e-6, Storage::Single).is_normal());
+        assert_eq!(step(0.0, f64::INFINITY, Storage::Double), 0.0);
+        // Heights 1000 to 1000.001 in single precision cannot hold 65536 distinct codes.
+        assert_eq!(step(1000.0, 1000.001, Storage::Single), 0.0);
+        assert!(step(1000.0, 1000.001, Storage::Double) > 0.0);
+    }
+
+    #[test]
+    fn written_tables_read_back_and_written_again_are_the_same_bytes() {
+        // Offsets and spans over many magnitudes, in both held precisions (cargo-fuzz found a
+        // band table whose step moved by one unit on every write).
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut uniform = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for case in 0..20_000 {
+            let storage = if case % 2 == 0 {
+                Storage::Single
+            } else {
+                Storage::Double
+            };
+            let offset = (uniform() - 0.5) * 10f64.powf(uniform() * 60.0 - 30.0);
+            let span = 10f64.powf(uniform() * 60.0 - 40.0);
+            let mut values: Vec<f64> = (0..17).map(|_| offset + span * uniform()).collect();
+            values.sort_by(f64::total_cmp);
+            let once = quantised(&values, storage);
+            let table = decoded(&once, storage);
+            assert!(table.windows(2).all(|w| w[0] <= w[1]), "case {case}");
+            let twice = quantised(&table, storage);
+            assert_eq!(once, twice, "case {case}: offset {offset:e}, span {span:e}");
+        }
     }
 
     #[test]
