@@ -472,23 +472,16 @@ mod car_cases {
 
     #[test]
     fn a_slow_growth_along_the_rows_is_not_stable() {
-        // Each row is y[c] = 1.003 y[c - 1] + e: across a 128-pixel probe it grows by a factor
-        // of 1.5, which looks bounded, but over a 1024-pixel row by 20 in amplitude (the right edge
-        // of a wide sample has many times the energy of its middle).
+        // Each row is y[c] = 1.003 y[c - 1] + e: run as a recursion, it grows by a factor of 1.5
+        // across a 128-pixel probe, which looks bounded, but by 20 in amplitude over a
+        // 1024-pixel row. The exact half-plane test refuses it whatever the data's variance.
         let m = Car2dModel {
             order: 1,
             gamma: vec![1.003, 0.0],
             sigma2: 1.0,
             mean: 0.0,
         };
-        let probe = m
-            .synthesize(128, 128, 0x5eed, false)
-            .index_axis_move(Axis(0), 0);
-        let seen = mean_square(probe.view());
-        let wide = m.synthesize(16, 1024, 1, false).index_axis_move(Axis(0), 0);
-        let ratio = right_edge_ratio(&wide, 64);
-        assert!(ratio > 5.0, "{ratio}");
-        assert!(!m.is_stable(2.0 * seen));
+        assert!(!m.is_stable(1e12));
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! jointly, so no KL decorrelation is needed and spatial cross-channel correlation is kept.
 
 use super::Car2dModel;
-use super::car2d::{MARGIN, bounded_sample};
+use super::car2d::bounded_sample;
 use super::neighbourhood::{causal, reach};
 use super::noise::require;
 use super::torus;
@@ -104,11 +104,6 @@ pub(crate) fn estimate(
 }
 
 impl Car3dModel {
-    /// The 3x3 matrix of neighbour `k`.
-    fn a_matrix(&self, k: usize) -> Matrix3<f64> {
-        Matrix3::from_row_slice(&self.a[9 * k..9 * k + 9])
-    }
-
     /// [`BandModel::fit`].
     fn fit_joint(band: ArrayView3<f64>, max_order: usize) -> Fit<Self> {
         let (_, h, w) = band.dim();
@@ -268,62 +263,37 @@ impl Car3dModel {
     ) -> Array3<f64> {
         let needed = Self::noise_len(rows, cols, tileable);
         require(noise, needed);
-        let offsets = causal(self.order as usize);
-        let l = self.noise_factor();
-        let a: Vec<Matrix3<f64>> = (0..offsets.len()).map(|k| self.a_matrix(k)).collect();
-        let mut draws = noise.chunks_exact(3);
-        let mut innovation = || -> [f64; 3] {
-            let w = draws.next().expect("length checked");
-            std::array::from_fn(|p| (0..=p).map(|q| l[(p, q)] * f64::from(w[q])).sum())
-        };
-        let apply = |acc: &mut [f64; 3], ak: &Matrix3<f64>, prev: [f64; 3]| {
-            for p in 0..3 {
-                acc[p] += ak[(p, 0)] * prev[0] + ak[(p, 1)] * prev[1] + ak[(p, 2)] * prev[2];
-            }
-        };
         if rows == 0 || cols == 0 {
             return Array3::zeros((3, rows, cols));
         }
-        if tileable {
-            let mut e: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(rows * cols));
-            for _ in 0..rows * cols {
-                for (plane, v) in e.iter_mut().zip(innovation()) {
-                    plane.push(v as f32);
-                }
+        let offsets = causal(self.order as usize);
+        let l = self.noise_factor();
+        let (height, width) = if tileable {
+            (rows, cols)
+        } else {
+            (torus::padded(rows), torus::padded(cols))
+        };
+        // e_r = L w_r: three noise values per site, row-major.
+        let mut e: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(height * width));
+        for w in noise[..needed].chunks_exact(3) {
+            for (p, plane) in e.iter_mut().enumerate() {
+                let v: f64 = (0..=p).map(|q| l[(p, q)] * f64::from(w[q])).sum();
+                plane.push(v as f32);
             }
-            let blocks: Vec<[f64; 9]> = (0..offsets.len())
-                .map(|k| std::array::from_fn(|q| self.a[9 * k + q]))
-                .collect();
-            let [y0, y1, y2] = torus::car3d((rows, cols), &e, (offsets, &blocks), self.mean);
-            return ndarray::stack(ndarray::Axis(0), &[y0.view(), y1.view(), y2.view()])
-                .expect("equal channel shapes");
         }
-        let pad = 3;
-        let width = pad + MARGIN + cols + MARGIN + pad;
-        let height = pad + MARGIN + rows;
-        let mut y = vec![[0.0f64; 3]; width * height];
-        let lin: Vec<usize> = offsets
-            .iter()
-            .map(|&(s1, s2)| (s1 * width as isize + s2) as usize)
+        let blocks: Vec<[f64; 9]> = (0..offsets.len())
+            .map(|k| std::array::from_fn(|q| self.a[9 * k + q]))
             .collect();
-        for r in pad..height {
-            for c in pad..width - pad {
-                let i = r * width + c;
-                let mut acc = innovation();
-                for (ak, &off) in a.iter().zip(&lin) {
-                    apply(&mut acc, ak, y[i - off]);
-                }
-                y[i] = acc;
-            }
-        }
-        Array3::from_shape_fn((3, rows, cols), |(ch, r, c)| {
-            y[(pad + MARGIN + r) * width + pad + MARGIN + c][ch] + self.mean[ch]
-        })
+        let planes = torus::car3d((height, width), &e, (offsets, &blocks), self.mean)
+            .map(|y| if tileable { y } else { torus::crop(y, rows, cols) });
+        let views = planes.each_ref().map(|p| p.view());
+        ndarray::stack(ndarray::Axis(0), &views).expect("equal channel shapes")
     }
 }
 
-/// A `(3, rows, cols)` sample by the causal recursion with a burn-in margin, or (`tileable`)
-/// exactly on the torus; three noise values per site, in the order the recursion visits them.
+/// A `(3, rows, cols)` sample solved exactly on a torus by the DFT (see [`torus`]): the
+/// output's own (`tileable`) or one [`torus::MARGIN`] larger on every side, cropped (as the 2D
+/// CAR); three noise values per site, row-major.
 impl BandModel for Car3dModel {
     const NAME: &'static str = "3dcar";
     const PLANES: usize = D;

@@ -29,7 +29,7 @@ pub trait BandModel: Clone + std::fmt::Debug + PartialEq + Send + Sync + Sized +
     fn fit(band: ArrayView3<f64>, max_order: usize) -> Fit<Self>;
 
     /// How many unit Gaussian values [`BandModel::synthesize_from`] consumes for a
-    /// `rows` x `cols` sample (a burn-in margin included where there is one).
+    /// `rows` x `cols` sample (the margin of a larger field included where it is cut from one).
     fn noise_len(rows: usize, cols: usize, tileable: bool) -> usize;
 
     /// A sample of shape `(PLANES, rows, cols)` driven by unit Gaussian `noise` of at least

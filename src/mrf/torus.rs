@@ -71,6 +71,36 @@ pub(super) fn row_phases(rows: usize) -> Vec<Complex64> {
         .collect()
 }
 
+/// Margin of a plain (non-tileable) field on every side of the torus it is cut from, pixels:
+/// beyond the correlation length of the repaired models, so the cut edges are unrelated.
+pub const MARGIN: usize = 32;
+
+/// Side of the torus a plain field of `n` samples is cut from: `n + 2 MARGIN` rounded up to a
+/// size whose prime factors are at most 7, which the FFT handles fast (0 for 0).
+pub(crate) fn padded(n: usize) -> usize {
+    if n == 0 {
+        return 0;
+    }
+    let smooth = |mut m: usize| {
+        for p in [2, 3, 5, 7] {
+            while m.is_multiple_of(p) {
+                m /= p;
+            }
+        }
+        m == 1
+    };
+    (n + 2 * MARGIN..)
+        .find(|&m| smooth(m))
+        .expect("smooth numbers are unbounded")
+}
+
+/// The `rows x cols` middle of a field from a [`padded`] torus.
+pub(crate) fn crop(field: Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
+    field
+        .slice(ndarray::s![MARGIN..MARGIN + rows, MARGIN..MARGIN + cols])
+        .to_owned()
+}
+
 /// The exact toroidal field of the 2D CAR `Y_r = sum_s gamma_s Y_{r-s} + sigma w_r` for the
 /// row-major unit noise `noise` (`rows * cols` values): `Y^ = sigma w^ / A(e^iw)`. Frequencies
 /// where `|A| <` [`SINGULAR`] are dropped. `mean` is added to every value.
