@@ -6,6 +6,7 @@ use ndarray::{Array3, Axis, stack};
 use rayon::prelude::*;
 
 use crate::btf::Btf;
+use crate::decompose::colour_transfer::ColourMarginals;
 use crate::decompose::marginals::{self, QuantileGrid, Quantiles};
 use crate::decompose::pyramid::auto_levels;
 use crate::decompose::stationarity::{NON_STATIONARY_SHARE, block_mean_share};
@@ -40,6 +41,10 @@ pub struct AnalysisOptions {
     pub colour_space: ColourSpace,
     /// Store a quantile table per pyramid band and match each synthesized band to it.
     pub band_marginals: bool,
+    /// Store the measured colour marginals along fixed directions and move each synthesized
+    /// subspace image's colours towards them (see [`crate::decompose::colour_transfer`]).
+    /// Default: true.
+    pub colour_matching: bool,
 }
 
 /// Largest stored range-map side, samples; larger maps are averaged down (a 128 x 128 map is
@@ -57,6 +62,7 @@ impl Default for AnalysisOptions {
             range_map: true,
             colour_space: ColourSpace::Lab,
             band_marginals: false,
+            colour_matching: true,
         }
     }
 }
@@ -334,6 +340,9 @@ where
         KlBasis::fit(image, options.colour_space)
     };
     let factors = kl.forward(image);
+    let colour_marginals = options
+        .colour_matching
+        .then(|| ColourMarginals::measure(&kl.space.planes(image)));
     let grid = QuantileGrid::NormalTails;
     let marginals: [Quantiles; 3] = factors.each_ref().map(|f| marginals::quantiles(f, grid));
     let pyramids: Vec<Pyramid> = factors
@@ -385,6 +394,7 @@ where
         marginal_grid: grid,
         levels: levels.into(),
         band_marginals,
+        colour_marginals,
     };
     (subspace, fits.into_iter().filter_map(|f| f.1).collect())
 }

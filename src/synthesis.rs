@@ -225,7 +225,8 @@ impl MaterialModel {
 
     /// Subspace image `k` with band noise from `noise`: every band synthesized in parallel
     /// (and matched to its measured marginal when the model has band tables), then per KL
-    /// factor (or colour band) the pyramid collapsed and the marginal matched.
+    /// factor (or colour band) the pyramid collapsed and the marginal matched, then the joint
+    /// colour distribution matched when the model has colour tables.
     fn subspace_image(
         &self,
         k: usize,
@@ -268,13 +269,17 @@ impl MaterialModel {
             .collect();
         let (factors, maps): (Vec<_>, Vec<_>) = factors.into_iter().unzip();
         let factors: [Array2<f64>; 3] = factors.try_into().expect("three factors");
-        Ok(s.kl.inverse_mapped(&factors, |f| {
+        let mut colours = s.kl.coordinates_mapped(&factors, |f| {
             [
                 maps[0].apply(f[0]),
                 maps[1].apply(f[1]),
                 maps[2].apply(f[2]),
             ]
-        }))
+        });
+        if let Some(c) = &s.colour_marginals {
+            c.transfer(&mut colours);
+        }
+        Ok(s.kl.space.linear_image(&colours))
     }
 
     /// The measured (view, light) pairs around a requested pair and their weights: the 3

@@ -44,6 +44,30 @@ impl ColourSpace {
         }
     }
 
+    /// The planar `(3, h, w)` linear RGB image of colour planes in this space.
+    pub fn linear_image(self, planes: &[Array2<f64>; 3]) -> Array3<f32> {
+        let (h, w) = planes[0].dim();
+        let mut out = Array3::<f32>::zeros((3, h, w));
+        let (mut r, mut g, mut b) =
+            out.multi_slice_mut((s![0, .., ..], s![1, .., ..], s![2, .., ..]));
+        Zip::from(&mut r)
+            .and(&mut g)
+            .and(&mut b)
+            .and(&planes[0])
+            .and(&planes[1])
+            .and(&planes[2])
+            .par_for_each(|r, g, b, &x, &y, &z| {
+                [*r, *g, *b] = self.to_linear([x as f32, y as f32, z as f32]);
+            });
+        out
+    }
+
+    /// Colour planes of a planar `(3, h, w)` linear RGB image in this space, `(h, w)` each.
+    pub fn planes(self, image: &Array3<f32>) -> [Array2<f64>; 3] {
+        let image = self.convert(image);
+        std::array::from_fn(|c| image.index_axis(Axis(0), c).mapv(f64::from))
+    }
+
     /// A planar `(3, h, w)` linear RGB image in this space.
     pub fn convert(self, image: &Array3<f32>) -> Array3<f32> {
         let mut out = image.clone();
@@ -138,39 +162,32 @@ impl KlBasis {
 
     /// The linear RGB image from its factor planes (all of one shape): planar (3, rows, cols).
     pub fn inverse(&self, factors: &[Array2<f64>; 3]) -> Array3<f32> {
-        self.inverse_mapped(factors, |f| f)
+        self.space
+            .linear_image(&self.coordinates_mapped(factors, |f| f))
     }
 
-    /// The image from its factor planes, each pixel's factor values passed through `map`
-    /// first (the synthesis's marginal matching, fused into the one pass over the pixels).
-    pub fn inverse_mapped(
+    /// The colour planes (coordinates in `space`) of factor planes, each pixel's factor values
+    /// passed through `map` first.
+    pub fn coordinates_mapped(
         &self,
         factors: &[Array2<f64>; 3],
         map: impl Fn([f64; 3]) -> [f64; 3] + Sync,
-    ) -> Array3<f32> {
-        let (h, w) = factors[0].dim();
-        let mut out = Array3::<f32>::zeros((3, h, w));
-        let (mut r, mut g, mut b) =
-            out.multi_slice_mut((s![0, .., ..], s![1, .., ..], s![2, .., ..]));
-        Zip::from(r.rows_mut())
-            .and(g.rows_mut())
-            .and(b.rows_mut())
-            .and(factors[0].rows())
-            .and(factors[1].rows())
-            .and(factors[2].rows())
-            .par_for_each(|r, g, b, f0, f1, f2| {
-                let (k, mean) = (&self.basis, &self.mean);
-                Zip::from(r).and(g).and(b).and(f0).and(f1).and(f2).for_each(
-                    |r, g, b, &f0, &f1, &f2| {
-                        let f = map([f0, f1, f2]);
-                        let channel = |c: usize| {
-                            (k[c][0] * f[0] + k[c][1] * f[1] + k[c][2] * f[2] + mean[c]) as f32
-                        };
-                        [*r, *g, *b] = self.space.to_linear([channel(0), channel(1), channel(2)]);
-                    },
-                );
+    ) -> [Array2<f64>; 3] {
+        let dim = factors[0].dim();
+        let [mut x, mut y, mut z] = std::array::from_fn(|_| Array2::<f64>::zeros(dim));
+        let (k, mean) = (&self.basis, &self.mean);
+        Zip::from(&mut x)
+            .and(&mut y)
+            .and(&mut z)
+            .and(&factors[0])
+            .and(&factors[1])
+            .and(&factors[2])
+            .par_for_each(|x, y, z, &f0, &f1, &f2| {
+                let f = map([f0, f1, f2]);
+                let channel = |c: usize| k[c][0] * f[0] + k[c][1] * f[1] + k[c][2] * f[2] + mean[c];
+                [*x, *y, *z] = [channel(0), channel(1), channel(2)];
             });
-        out
+        [x, y, z]
     }
 }
 

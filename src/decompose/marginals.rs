@@ -88,13 +88,17 @@ pub fn quantiles_at(plane: &Array2<f64>, probabilities: &[f64]) -> Vec<f64> {
     }
     sample.sort_by(f64::total_cmp);
     let last = (sample.len() - 1) as f64;
+    // Interpolated as a + (b - a) f, exact where neighbours are equal, and made non-decreasing
+    // against rounding (a flat plane gave tables decreasing in the last bit).
+    let mut floor = f64::NEG_INFINITY;
     probabilities
         .iter()
         .map(|&p| {
             let pos = last * p.clamp(0.0, 1.0);
             let (i, f) = (pos.floor() as usize, pos - pos.floor());
             let next = (i + 1).min(sample.len() - 1);
-            sample[i] * (1.0 - f) + sample[next] * f
+            floor = floor.max(sample[i] + (sample[next] - sample[i]) * f);
+            floor
         })
         .collect()
 }

@@ -3,6 +3,7 @@
 //! check that the images are stationary textures at all.
 
 pub mod cluster;
+pub mod colour_transfer;
 pub mod kl;
 pub mod marginals;
 pub mod pyramid;

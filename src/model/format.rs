@@ -6,6 +6,7 @@ use std::path::Path;
 use super::material::{BandMarginals, MaterialModel, MaterialParts, RangeMap, SubspaceModel};
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
+use crate::decompose::colour_transfer::{ColourMarginals, DIRECTIONS};
 use crate::decompose::marginals::{BAND_QUANTILES, QUANTILES, QuantileGrid};
 use crate::decompose::{ColourSpace, KlBasis};
 pub use crate::io::bytes::{Parse, Reader};
@@ -15,8 +16,8 @@ use crate::mrf::{AnyLevels, BandModel, KindVisitor, Levels, LevelsVisitor, Model
 /// The four bytes every model file starts with.
 pub const MAGIC: [u8; 4] = *b"BTFM";
 /// The format version this library writes. Version 1 files (no colour space, no band
-/// marginals: linear RGB KL) are still read.
-pub const VERSION: u16 = 2;
+/// marginals: linear RGB KL) and version 2 files (no joint colour tables) are still read.
+pub const VERSION: u16 = 3;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -136,7 +137,8 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
     envelope::seal(MAGIC, VERSION, &w.0)
 }
 
-/// The version 2 tail: the colour space, then the band quantile tables if any.
+/// The version 2 tail: the colour space, then the band quantile tables if any; version 3 adds
+/// the joint colour tables if any.
 fn write_colour(w: &mut Writer, model: &MaterialModel) {
     let space = model
         .subspaces()
@@ -165,6 +167,16 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
             write_quantised(w, table, Storage::Double);
         }
     }
+    let with_colours = model
+        .subspaces()
+        .iter()
+        .all(|s| s.colour_marginals.is_some());
+    w.u8(if with_colours { DIRECTIONS as u8 } else { 0 });
+    for s in model.subspaces().iter().filter(|_| with_colours) {
+        for table in s.colour_marginals.iter().flat_map(|c| &c.tables) {
+            write_quantised(w, table, Storage::Double);
+        }
+    }
 }
 
 /// Bytes the band quantile tables take in the file (0 without them).
@@ -176,6 +188,16 @@ pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
         .map(|b| 3 * b.tables.len())
         .sum();
     tables * (8 + 2 * BAND_QUANTILES)
+}
+
+/// Bytes the joint colour tables take in the file (0 without them).
+pub fn colour_marginal_bytes(model: &MaterialModel) -> usize {
+    let subspaces = model.subspaces();
+    if subspaces.iter().all(|s| s.colour_marginals.is_some()) {
+        subspaces.len() * DIRECTIONS * (8 + 2 * BAND_QUANTILES)
+    } else {
+        0
+    }
 }
 
 /// Ranges narrower than this are written as flat tables: heights in texels and factor
@@ -377,6 +399,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             marginal_grid: QuantileGrid::Uniform,
             levels: level_models,
             band_marginals: None,
+            colour_marginals: None,
         });
     }
     let range_map = match r.u8()? {
@@ -417,6 +440,9 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     };
     if version >= 2 {
         read_colour(&mut r, &mut subspaces, usize::from(levels))?;
+    }
+    if version >= 3 {
+        read_colour_marginals(&mut r, &mut subspaces)?;
     }
     r.finish()?;
     MaterialModel::new(MaterialParts {
@@ -466,20 +492,51 @@ fn read_colour(r: &mut Reader, subspaces: &mut [SubspaceModel], levels: usize) -
         for _ in 0..levels {
             let mut level: [Vec<f64>; 3] = Default::default();
             for table in &mut level {
-                let (lo, quantum) = (r.f32()?, r.f32()?);
-                if quantum < 0.0 {
-                    return Err(format!("negative band quantile step {quantum}"));
-                }
-                *table = (0..count)
-                    .map(|_| decode(lo, quantum, r.u16()?, "band quantile"))
-                    .collect::<Parse<Vec<f64>>>()?;
-                if table.windows(2).any(|w| w[1] < w[0]) {
-                    return Err("band quantile table is not increasing".into());
-                }
+                *table = read_table(r, count, "band quantile")?;
             }
             tables.push(level);
         }
         s.band_marginals = Some(BandMarginals { tables });
+    }
+    Ok(())
+}
+
+/// Reads a quantised table of `count` values (see [`write_quantised`]): finite, non-decreasing.
+fn read_table(r: &mut Reader, count: usize, what: &str) -> Parse<Vec<f64>> {
+    let (lo, quantum) = (r.f32()?, r.f32()?);
+    if quantum < 0.0 {
+        return Err(format!("negative {what} step {quantum}"));
+    }
+    let table = (0..count)
+        .map(|_| decode(lo, quantum, r.u16()?, what))
+        .collect::<Parse<Vec<f64>>>()?;
+    if table.windows(2).any(|w| w[1] < w[0]) {
+        return Err(format!("{what} table is not increasing"));
+    }
+    Ok(table)
+}
+
+/// Reads the version 3 joint colour tables (see [`write_colour`]) into the subspace models.
+fn read_colour_marginals(r: &mut Reader, subspaces: &mut [SubspaceModel]) -> Parse<()> {
+    let count = usize::from(r.u8()?);
+    if count == 0 {
+        return Ok(());
+    }
+    if count != DIRECTIONS {
+        return Err(format!(
+            "{count} colour directions (0 or {DIRECTIONS} accepted)"
+        ));
+    }
+    r.ensure(
+        subspaces.len() * DIRECTIONS,
+        8 + 2 * BAND_QUANTILES,
+        "colour quantiles",
+    )?;
+    for s in subspaces.iter_mut() {
+        let tables = (0..DIRECTIONS)
+            .map(|_| read_table(r, BAND_QUANTILES, "colour quantile"))
+            .collect::<Parse<Vec<_>>>()?;
+        s.colour_marginals = Some(ColourMarginals { tables });
     }
     Ok(())
 }

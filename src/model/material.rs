@@ -5,7 +5,7 @@ use ndarray::Array2;
 use super::{ModelError, Result};
 use crate::btf::DirectionSet;
 use crate::decompose::KlBasis;
-#[cfg(doc)]
+use crate::decompose::colour_transfer::{ColourMarginals, DIRECTIONS};
 use crate::decompose::marginals::BAND_QUANTILES;
 use crate::decompose::marginals::{QuantileGrid, Quantiles};
 use crate::decompose::pyramid::{Taps, apply_separable, pyramid_step};
@@ -44,6 +44,9 @@ pub struct SubspaceModel {
     pub levels: AnyLevels,
     /// Quantile tables of the measured pyramid bands, if the model matches band marginals.
     pub band_marginals: Option<BandMarginals>,
+    /// The measured colour marginals along fixed directions, if the model matches the joint
+    /// colour distribution (format version 3).
+    pub colour_marginals: Option<ColourMarginals>,
 }
 
 /// The measured marginal distribution of every pyramid band of a subspace image (format
@@ -184,7 +187,15 @@ impl MaterialModel {
                 super::format::MAX_LEVELS
             ));
         }
+        let coloured = parts.subspaces[0].colour_marginals.is_some();
         for (k, s) in parts.subspaces.iter().enumerate() {
+            if s.colour_marginals.is_some() != coloured {
+                return bad(format!(
+                    "subspace {k} {} colour tables, subspace 0 {}",
+                    if coloured { "lacks" } else { "has" },
+                    if coloured { "has them" } else { "not" }
+                ));
+            }
             if s.levels.kind() != kind || s.levels.len() != levels {
                 return bad(format!(
                     "subspace {k} has {} {} levels, subspace 0 {levels} {kind} levels",
@@ -196,6 +207,18 @@ impl MaterialModel {
             if usize::from(v) >= nv || usize::from(l) >= nl {
                 return bad(format!(
                     "subspace {k}: representative ({v}, {l}) outside the direction sets"
+                ));
+            }
+            if let Some(c) = &s.colour_marginals
+                && (c.tables.len() != DIRECTIONS
+                    || c.tables.iter().any(|t| {
+                        t.len() != BAND_QUANTILES
+                            || t.iter().any(|v| !v.is_finite())
+                            || t.windows(2).any(|w| w[1] < w[0])
+                    }))
+            {
+                return bad(format!(
+                    "subspace {k}: colour tables are not {DIRECTIONS} non-decreasing tables of {BAND_QUANTILES} finite values"
                 ));
             }
             if let Some(b) = &s.band_marginals
@@ -324,6 +347,7 @@ mod tests {
             marginal_grid: QuantileGrid::Uniform,
             levels: Levels::new(vec![per_level; levels]).unwrap().into(),
             band_marginals: None,
+            colour_marginals: None,
         }
     }
 
@@ -399,6 +423,19 @@ mod tests {
             })
         });
         assert!(e.contains("range map of 5 samples as 2x3"), "{e}");
+        let table: Vec<f64> = (0..BAND_QUANTILES).map(|i| i as f64).collect();
+        let colours = ColourMarginals {
+            tables: vec![table; DIRECTIONS],
+        };
+        let e = refused(|p| p.subspaces[1].colour_marginals = Some(colours.clone()));
+        assert!(e.contains("subspace 1 has colour tables"), "{e}");
+        let e = refused(|p| {
+            for s in &mut p.subspaces {
+                s.colour_marginals = Some(colours.clone());
+            }
+            p.subspaces[0].colour_marginals.as_mut().unwrap().tables[3][7] = f64::NAN;
+        });
+        assert!(e.contains("subspace 0: colour tables are not"), "{e}");
     }
 
     #[test]

@@ -24,6 +24,7 @@ struct AnalyzeReport<'a> {
     /// The stored range map's size; `None` without one.
     range_map: Option<RangeMapSize>,
     band_marginal_bytes: usize,
+    colour_marginal_bytes: usize,
     repairs: &'a [AnalysisRepair],
     warnings: &'a [String],
 }
@@ -76,8 +77,14 @@ pub struct Args {
     /// synthesized band to it before the pyramid is collapsed.
     #[arg(long)]
     band_marginals: bool,
+    /// Do not store the colour marginals along 12 directions (888 bytes a subspace image)
+    /// that move every synthesized image's colours towards the measured joint colour
+    /// distribution; without them the independently synthesized colour factors combine into
+    /// colours the material never shows (saturated specks on dark pixels).
+    #[arg(long)]
+    no_colour_matching: bool,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
-    /// clusters, levels, band_marginal_bytes, repairs, warnings.
+    /// clusters, levels, band_marginal_bytes, colour_marginal_bytes, repairs, warnings.
     #[arg(long)]
     json: bool,
 }
@@ -113,6 +120,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         seed: args.seed,
         range_map: !args.no_range_map,
         band_marginals: args.band_marginals,
+        colour_matching: !args.no_colour_matching,
         ..AnalysisOptions::default()
     };
     let (model, report) = analyze(&btf, &options, &Bar::new(global))?;
@@ -138,6 +146,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                 step: r.step,
             }),
             band_marginal_bytes: format::band_marginal_bytes(&model),
+            colour_marginal_bytes: format::colour_marginal_bytes(&model),
             repairs: &report.repairs,
             warnings: &report.warnings,
         })?;

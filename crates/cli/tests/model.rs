@@ -244,9 +244,9 @@ fn cli_analyze_and_synthesize() {
 fn real_rti_sets_analyze_and_synthesize() {
     // (set, kind, file size in KB, fidelity score) as quoted.
     let quoted = [
-        ("loewenkopf", ModelKind::Gmrf, 13.3, 1.27),
-        ("clay-leaf", ModelKind::Car2d, 29.9, 0.84),
-        ("loewenkopf", ModelKind::Car3d, 15.5, 0.94),
+        ("loewenkopf", ModelKind::Gmrf, 20.2, 1.13),
+        ("clay-leaf", ModelKind::Car2d, 36.8, 0.87),
+        ("loewenkopf", ModelKind::Car3d, 22.4, 0.92),
     ];
     let mut misses = Vec::new();
     for (set, kind, kb, score) in quoted {

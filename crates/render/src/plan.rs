@@ -178,6 +178,7 @@ mod tests {
                 .unwrap()
                 .into(),
             band_marginals: None,
+            colour_marginals: None,
         };
         MaterialModel::new(MaterialParts {
             views,
