@@ -134,6 +134,31 @@ pub fn lab_to_linear(lab: [f32; 3]) -> [f32; 3] {
     xyz_to_linear(lab_to_xyz(lab))
 }
 
+/// [`lab_to_linear`] of the nearest colour with no negative channel at the same L* and hue:
+/// a* and b* scaled towards 0 (bisection on the scale) until every channel is at least 0, then
+/// what is still negative (L* <= 0) set to 0. A synthesized dark pixel keeps the chroma excursion of
+/// a brighter one, which lies outside the gamut and would otherwise come out as a pure
+/// primary after clamping.
+pub fn lab_to_linear_in_gamut(lab: [f32; 3]) -> [f32; 3] {
+    let rgb = lab_to_linear(lab);
+    if rgb.iter().all(|&c| c >= 0.0) {
+        return rgb;
+    }
+    let (mut inside, mut outside) = (0.0f32, 1.0f32);
+    for _ in 0..12 {
+        let t = 0.5 * (inside + outside);
+        if lab_to_linear([lab[0], t * lab[1], t * lab[2]])
+            .iter()
+            .all(|&c| c >= 0.0)
+        {
+            inside = t;
+        } else {
+            outside = t;
+        }
+    }
+    lab_to_linear([lab[0], inside * lab[1], inside * lab[2]]).map(|c| c.max(0.0))
+}
+
 /// CIE76 colour difference: the Euclidean distance in Lab.
 pub fn delta_e76(a: [f32; 3], b: [f32; 3]) -> f32 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
@@ -146,6 +171,26 @@ mod tests {
 
     fn srgb8(r: u8, g: u8, b: u8) -> [f32; 3] {
         [r, g, b].map(|c| srgb_to_linear(c as f32 / 255.0))
+    }
+
+    #[test]
+    fn out_of_gamut_colours_lose_chroma_not_lightness() {
+        // In gamut: unchanged.
+        let lab = linear_to_lab([0.2, 0.1, 0.05]);
+        assert_eq!(lab_to_linear_in_gamut(lab), lab_to_linear(lab));
+        // A dark pixel with a strong blue excursion: a negative channel as it stands.
+        let dark = [8.0, 20.0, -40.0];
+        assert!(lab_to_linear(dark).iter().any(|&c| c < 0.0));
+        let fixed = lab_to_linear_in_gamut(dark);
+        assert!(fixed.iter().all(|&c| c >= 0.0), "{fixed:?}");
+        let back = linear_to_lab(fixed);
+        assert_abs_diff_eq!(back[0], 8.0, epsilon = 0.05);
+        // Same hue, less chroma, at the gamut's edge (one channel near 0).
+        assert!(back[1] > 0.0 && back[2] < 0.0 && back[1].hypot(back[2]) < 44.7);
+        assert!((back[2] / back[1] + 2.0).abs() < 0.05, "{back:?}");
+        assert!(fixed.iter().any(|&c| c < 2e-4), "{fixed:?}");
+        // Below black: black.
+        assert_eq!(lab_to_linear_in_gamut([-3.0, 5.0, 5.0]), [0.0; 3]);
     }
 
     #[test]

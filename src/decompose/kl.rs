@@ -13,7 +13,7 @@
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use ndarray::{Array2, Array3, Axis, Zip, s};
 
-use crate::color::{lab_to_linear, linear_to_lab};
+use crate::color::{lab_to_linear, lab_to_linear_in_gamut, linear_to_lab};
 
 /// The colour coordinates the basis decorrelates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -44,7 +44,8 @@ impl ColourSpace {
         }
     }
 
-    /// The planar `(3, h, w)` linear RGB image of colour planes in this space.
+    /// The planar `(3, h, w)` linear RGB image of colour planes in this space; Lab colours
+    /// outside the RGB gamut lose chroma at their lightness ([`lab_to_linear_in_gamut`]).
     pub fn linear_image(self, planes: &[Array2<f64>; 3]) -> Array3<f32> {
         let (h, w) = planes[0].dim();
         let mut out = Array3::<f32>::zeros((3, h, w));
@@ -57,7 +58,11 @@ impl ColourSpace {
             .and(&planes[1])
             .and(&planes[2])
             .par_for_each(|r, g, b, &x, &y, &z| {
-                [*r, *g, *b] = self.to_linear([x as f32, y as f32, z as f32]);
+                let c = [x as f32, y as f32, z as f32];
+                [*r, *g, *b] = match self {
+                    ColourSpace::LinearRgb => c,
+                    ColourSpace::Lab => lab_to_linear_in_gamut(c),
+                };
             });
         out
     }
