@@ -2,7 +2,7 @@
 //! light space, then for every subspace image decorrelate colour (KL, except for the 3D CAR),
 //! split into a Gaussian-Laplacian pyramid and fit one MRF per band.
 
-use ndarray::{Array3, Axis, stack};
+use ndarray::{Array2, Array3, Axis, stack};
 use rayon::prelude::*;
 
 use crate::btf::Btf;
@@ -13,8 +13,8 @@ use crate::decompose::stationarity::{NON_STATIONARY_SHARE, block_mean_share};
 use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceClustering};
 use crate::geometry::{self, relight};
 use crate::model::{
-    AnyLevels, BandMarginals, MaterialModel, MaterialParts, ModelError, ModelKind, RangeMap,
-    Result, SubspaceModel,
+    AnyLevels, BandMarginals, Exemplar, MaterialModel, MaterialParts, ModelError, ModelKind,
+    RangeMap, Result, SubspaceModel, format,
 };
 use crate::mrf::{BandModel, KindVisitor, Levels, Repair, neighbourhood::MAX_ORDER};
 use crate::progress::Progress;
@@ -45,7 +45,13 @@ pub struct AnalysisOptions {
     /// subspace image's colours towards them (see [`crate::decompose::colour_transfer`]).
     /// Default: true.
     pub colour_matching: bool,
+    /// Largest side of the structure exemplar stored when the model has no range map and
+    /// works in CIE Lab (0: none; see [`crate::model::Exemplar`]). Default: [`EXEMPLAR_SIDE`].
+    pub exemplar_side: usize,
 }
+
+/// Default largest side of the structure exemplar, pixels (a 128 x 128 crop: 32 KiB).
+pub const EXEMPLAR_SIDE: usize = 128;
 
 /// Largest stored range-map side, samples; larger maps are averaged down (a 128 x 128 map is
 /// 32 KiB in the model file).
@@ -63,6 +69,7 @@ impl Default for AnalysisOptions {
             colour_space: ColourSpace::Lab,
             band_marginals: false,
             colour_matching: true,
+            exemplar_side: EXEMPLAR_SIDE,
         }
     }
 }
@@ -191,8 +198,16 @@ pub fn analyze(
     // divided out before fitting, since synthesis applies it again (geometry::relight).
     let frontal = geometry::frontal_view(btf);
     let registered = range_map.as_ref().map(|m| m.registered(h, w));
+    // Without a range map the structure comes from an exemplar: the same centred crop of every
+    // subspace image, whose L* detail sets each subspace's gain.
+    let wanted = options.exemplar_side > 0 && options.colour_space == ColourSpace::Lab;
+    let crop = (range_map.is_none() && wanted).then(|| {
+        let (ch, cw) = (h.min(options.exemplar_side), w.min(options.exemplar_side));
+        ((h - ch) / 2, (w - cw) / 2, ch, cw)
+    });
     progress.start("fitting models", clustering.clusters() as u64);
-    let fitted: Vec<(SubspaceModel, Vec<AnalysisRepair>, f64)> = clustering
+    type Fitted = (SubspaceModel, Vec<AnalysisRepair>, f64, Option<Array2<f64>>);
+    let fitted: Vec<Fitted> = clustering
         .representatives
         .par_iter()
         .enumerate()
@@ -205,6 +220,10 @@ pub fn analyze(
             {
                 relight::remove_shading(&mut image, heights, light.vector(), map.strength_of(l));
             }
+            let lightness = crop.map(|(y0, x0, ch, cw)| {
+                let [l, _, _] = ColourSpace::Lab.planes(&image);
+                l.slice(ndarray::s![y0..y0 + ch, x0..x0 + cw]).to_owned()
+            });
             let (subspace, notes) = options.kind.visit(FitSubspace {
                 image: &image,
                 options,
@@ -227,17 +246,21 @@ pub fn analyze(
                 },
                 notes,
                 share,
+                lightness,
             ))
         })
         .collect::<Result<_>>()?;
     progress.finish();
     let mut subspaces = Vec::with_capacity(fitted.len());
     let mut shares = Vec::with_capacity(fitted.len());
-    for (s, notes, share) in fitted {
+    let mut crops = Vec::with_capacity(fitted.len());
+    for (s, notes, share, lightness) in fitted {
         subspaces.push(s);
         report.repairs.extend(notes);
         shares.push(share);
+        crops.extend(lightness);
     }
+    let exemplar = exemplar_from(&crops);
     report.warnings.extend(stationarity_warning(shares));
     let model = MaterialModel::new(MaterialParts {
         views: btf.views().clone(),
@@ -247,8 +270,35 @@ pub fn analyze(
         cluster_table: clustering.labels,
         subspaces,
         range_map,
+        exemplar,
     })?;
     Ok((model, report))
+}
+
+/// The structure exemplar from the L* crops of the subspace images (none without crops): the
+/// first subspace's crop, and every subspace's detail contrast over it as its gain.
+fn exemplar_from(crops: &[Array2<f64>]) -> Option<Exemplar> {
+    let first = crops.first()?;
+    let (rows, cols) = first.dim();
+    let sigma = geometry::detail_scale(rows, cols);
+    let contrast = |c: &Array2<f64>| geometry::split_detail(c, sigma, false).1.std(0.0);
+    let reference = contrast(first);
+    let gains = crops
+        .iter()
+        .map(|c| {
+            if reference > 0.0 {
+                (contrast(c) / reference) as f32
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    Some(Exemplar {
+        rows,
+        cols,
+        lightness: format::as_stored(&first.iter().map(|&v| v as f32).collect::<Vec<_>>()),
+        gains,
+    })
 }
 
 /// A warning when the subspace images do not look like a stationary texture: the median of
@@ -284,7 +334,7 @@ fn estimate_range_map(
     let mut map = RangeMap {
         rows: tile.nrows(),
         cols: tile.ncols(),
-        heights: tile.iter().map(|&v| v as f32).collect(),
+        heights: format::as_stored(&tile.iter().map(|&v| v as f32).collect::<Vec<_>>()),
         step,
         strength: Vec::new(),
     };

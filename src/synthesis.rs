@@ -15,10 +15,10 @@ use rayon::prelude::*;
 
 use crate::btf::{Direction, Weighted};
 use crate::decompose::marginals::{self, MarginalMap};
-use crate::decompose::{Border, Pyramid};
+use crate::decompose::{Border, ColourSpace, Pyramid};
 use crate::geometry::integrate::{Edges, normals_of_periodic};
 use crate::geometry::relight::shading_factor;
-use crate::geometry::{quilt, resample_periodic};
+use crate::geometry::{detail_scale, quilt, resample_periodic, split_detail};
 use crate::model::{MaterialModel, ModelError, Result};
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
@@ -50,6 +50,8 @@ pub struct SynthesisCache {
     subspaces: Vec<OnceLock<Array3<f32>>>,
     heights: Option<Array2<f64>>,
     normals: OnceLock<Option<Array3<f64>>>,
+    /// The quilted exemplar detail (zero mean), made on first use; `None` without an exemplar.
+    structure: OnceLock<Option<Array2<f64>>>,
     noise: NoiseBank,
 }
 
@@ -220,7 +222,7 @@ impl MaterialModel {
     /// `k` out of range, or a size of zero, beyond [`MAX_SIDE`], or not tileable.
     pub fn synthesize_subspace(&self, k: usize, o: &SynthesisOptions) -> Result<Array3<f32>> {
         check(self, o)?;
-        self.subspace_image(k, o, &NoiseBank::transient())
+        self.subspace_image(k, o, &NoiseBank::transient(), &OnceLock::new())
     }
 
     /// Subspace image `k` with band noise from `noise`: every band synthesized in parallel
@@ -232,6 +234,7 @@ impl MaterialModel {
         k: usize,
         o: &SynthesisOptions,
         noise: &NoiseBank,
+        structure: &OnceLock<Option<Array2<f64>>>,
     ) -> Result<Array3<f32>> {
         let s = self.subspaces().get(k).ok_or_else(|| {
             ModelError::parameter("subspace", format!("{k} of {}", self.subspaces().len()))
@@ -276,6 +279,16 @@ impl MaterialModel {
                 maps[2].apply(f[2]),
             ]
         });
+        if let Some(e) = self.exemplar()
+            && s.kl.space == ColourSpace::Lab
+            && let Some(detail) = structure.get_or_init(|| self.exemplar_detail(o)).as_ref()
+        {
+            // The MRF's L* keeps what is coarser than the exemplar's patches; the quilted
+            // exemplar, at this subspace's contrast, brings the structure finer than them.
+            let sigma = detail_scale(e.rows, e.cols);
+            let (coarse, _) = split_detail(&colours[0], sigma, o.tileable);
+            colours[0] = coarse + detail * f64::from(e.gains[k]);
+        }
         if let Some(c) = &s.colour_marginals {
             c.transfer(&mut colours);
         }
@@ -369,6 +382,7 @@ impl MaterialModel {
                 .collect(),
             heights,
             normals: OnceLock::new(),
+            structure: OnceLock::new(),
             noise,
         }
     }
@@ -417,7 +431,8 @@ impl MaterialModel {
         match slot.get() {
             Some(part) => Ok(part),
             None => {
-                let made = self.subspace_image(k, &cache.options, &cache.noise)?;
+                let made =
+                    self.subspace_image(k, &cache.options, &cache.noise, &cache.structure)?;
                 Ok(slot.get_or_init(|| made))
             }
         }
@@ -477,6 +492,20 @@ impl MaterialModel {
         Some(resample_periodic(&torus, rows.max(1), cols.max(1)))
     }
 
+    /// The exemplar's detail quilted ([`quilt`], seeded by the synthesis seed) onto the output
+    /// torus, zero mean; `None` without an exemplar.
+    fn exemplar_detail(&self, o: &SynthesisOptions) -> Option<Array2<f64>> {
+        let e = self.exemplar()?;
+        let mut detail = quilt(
+            &e.samples(),
+            o.rows.max(1),
+            o.cols.max(1),
+            crate::mrf::noise::mix(o.seed, EXEMPLAR_SEED),
+        );
+        detail -= detail.mean().unwrap_or(0.0);
+        Some(detail)
+    }
+
     /// The bump strength for `light`: the measured lights' fitted strengths
     /// ([`crate::geometry::relight`]) blended with the same barycentric weights as the images,
     /// so it changes continuously with the light; 1 without stored strengths.
@@ -498,6 +527,8 @@ impl MaterialModel {
 
 /// Mixed into the synthesis seed for the range map's quilt (the bands use their own indices).
 const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
+/// Mixed into the synthesis seed for the exemplar's quilt.
+const EXEMPLAR_SEED: u64 = 0x6578_656d_706c_6172;
 
 /// Bump mapping (mrf_math.md 1(g)): multiplies an image by the shading factor
 /// `1 + strength (s - 1)`, `s = max(0, n . l) / mean(max(0, n . l))`, of the unit normals `n`

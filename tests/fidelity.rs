@@ -313,9 +313,14 @@ fn every_model_on_every_photograph_is_judged() {
         print_levels(name, y.levels());
         let (_, h, w) = measured.dim();
         let zenith = Direction::new(0.0, 0.0);
-        for kind in ModelKind::ALL {
+        // With the structure exemplar (the default for a photograph) and without it.
+        for (kind, exemplar_side) in ModelKind::ALL
+            .into_iter()
+            .flat_map(|k| [(k, btfmrf::analysis::EXEMPLAR_SIDE), (k, 0)])
+        {
             let options = AnalysisOptions {
                 kind,
+                exemplar_side,
                 ..AnalysisOptions::default()
             };
             let (model, _) = analyze(&btf, &options, &NoProgress).unwrap();
@@ -329,7 +334,8 @@ fn every_model_on_every_photograph_is_judged() {
                 .judge(&model.synthesize_image(&zenith, &zenith, &o).unwrap())
                 .unwrap();
             println!(
-                "{name} {kind}: structure {:.4} (x{:.2} crop, x{:.2} random phase), colour {:.2} Lab",
+                "{name} {kind} exemplar {exemplar_side}: {} bytes, structure {:.4} (x{:.2} crop, x{:.2} random phase), colour {:.2} Lab",
+                btfmrf::model::format::to_bytes(&model).len(),
                 f.judgement.structure,
                 f.structure_vs_crop,
                 f.structure_vs_random_phase,

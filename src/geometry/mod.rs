@@ -8,7 +8,7 @@ pub mod relight;
 
 pub use integrate::{frankot_chellappa, normals_of};
 pub use photometric_stereo::{NormalMap, estimate_normals, frontal_view};
-pub use quilt::{quilt, resample_periodic};
+pub use quilt::{detail_scale, quilt, resample_periodic, split_detail};
 
 use ndarray::Array2;
 

@@ -73,6 +73,21 @@ pub fn quilt(source: &Array2<f64>, rows: usize, cols: usize, seed: u64) -> Array
     quilt_patches(source, rows, cols, seed).0
 }
 
+/// The Gaussian scale (samples) below which [`quilt`] keeps a `rows` x `cols` source's
+/// detail: half a patch.
+pub fn detail_scale(rows: usize, cols: usize) -> f64 {
+    let patch = (rows.min(cols) / PATCH_DIVISOR).clamp(PATCH_SIDE.0, PATCH_SIDE.1);
+    patch as f64 / 2.0
+}
+
+/// `field` split into its Gaussian blur of standard deviation `sigma` (edges repeated, or
+/// wrapped when `wrap`) and the zero-mean rest: (coarse, detail), coarse + detail = field.
+pub fn split_detail(field: &Array2<f64>, sigma: f64, wrap: bool) -> (Array2<f64>, Array2<f64>) {
+    let mut detail = high_pass(field, sigma, wrap);
+    detail -= detail.mean().unwrap_or(0.0);
+    (field - &detail, detail)
+}
+
 /// [`quilt`], with the index of the patch every sample came from.
 fn quilt_patches(
     source: &Array2<f64>,

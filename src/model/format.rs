@@ -3,7 +3,9 @@
 
 use std::path::Path;
 
-use super::material::{BandMarginals, MaterialModel, MaterialParts, RangeMap, SubspaceModel};
+use super::material::{
+    BandMarginals, Exemplar, MaterialModel, MaterialParts, RangeMap, SubspaceModel,
+};
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
 use crate::decompose::colour_transfer::{ColourMarginals, DIRECTIONS};
@@ -177,6 +179,19 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
             write_quantised(w, table, Storage::Double);
         }
     }
+    match model.exemplar() {
+        None => w.u8(0),
+        Some(e) => {
+            w.u8(1);
+            w.u16(e.rows as u16);
+            w.u16(e.cols as u16);
+            let lightness: Vec<f64> = e.lightness.iter().map(|&v| f64::from(v)).collect();
+            write_quantised(w, &lightness, Storage::Single);
+            for &g in &e.gains {
+                w.f32(f64::from(g));
+            }
+        }
+    }
 }
 
 /// Bytes the band quantile tables take in the file (0 without them).
@@ -188,6 +203,13 @@ pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
         .map(|b| 3 * b.tables.len())
         .sum();
     tables * (8 + 2 * BAND_QUANTILES)
+}
+
+/// Bytes the structure exemplar takes in the file (0 without one).
+pub fn exemplar_bytes(model: &MaterialModel) -> usize {
+    model
+        .exemplar()
+        .map_or(0, |e| 4 + 8 + 2 * e.lightness.len() + 4 * e.gains.len())
 }
 
 /// Bytes the joint colour tables take in the file (0 without them).
@@ -277,24 +299,47 @@ fn decode(lo: f64, quantum: f64, code: u16, what: &str) -> Parse<f64> {
     }
 }
 
-/// Values as `f32` low, `f32` quantum and one `u16` code each, `low + quantum x code` (see
-/// [`quantisation`]); rounding is monotone, so a non-decreasing table stays non-decreasing.
-fn write_quantised(w: &mut Writer, values: &[f64], storage: Storage) {
+/// Single-precision values (range-map heights, exemplar L*) as a file stores and reads them
+/// back: what analysis keeps, so a model synthesizes the same before and after it is written
+/// (the quilts that enlarge them choose patches by small differences).
+pub fn as_stored(values: &[f32]) -> Vec<f32> {
+    let wide: Vec<f64> = values.iter().map(|&v| f64::from(v)).collect();
+    let (low, step, codes) = quantised_codes(&wide, Storage::Single);
+    codes
+        .into_iter()
+        .map(|c| (f64::from(low) + f64::from(step) * f64::from(c)) as f32)
+        .collect()
+}
+
+/// `low`, step and one code per value, `low + step x code` (see [`quantisation`]); rounding
+/// is monotone, so a non-decreasing table stays non-decreasing.
+fn quantised_codes(values: &[f64], storage: Storage) -> (f32, f32, Vec<u16>) {
     let (min, max) = values
         .iter()
         .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
     let (low, step) = quantisation(min, max, storage);
+    let codes = values
+        .iter()
+        .map(|&v| {
+            if step > 0.0 {
+                ((v - f64::from(low)) / f64::from(step))
+                    .round()
+                    .clamp(0.0, 65535.0) as u16
+            } else {
+                0
+            }
+        })
+        .collect();
+    (low, step, codes)
+}
+
+/// Values as `f32` low, `f32` quantum and one `u16` code each (see [`quantised_codes`]).
+fn write_quantised(w: &mut Writer, values: &[f64], storage: Storage) {
+    let (low, step, codes) = quantised_codes(values, storage);
     w.f32(f64::from(low));
     w.f32(f64::from(step));
-    for &v in values {
-        let code = if step > 0.0 {
-            ((v - f64::from(low)) / f64::from(step))
-                .round()
-                .clamp(0.0, 65535.0)
-        } else {
-            0.0
-        };
-        w.u16(code as u16);
+    for code in codes {
+        w.u16(code);
     }
 }
 
@@ -441,9 +486,12 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     if version >= 2 {
         read_colour(&mut r, &mut subspaces, usize::from(levels))?;
     }
-    if version >= 3 {
+    let exemplar = if version >= 3 {
         read_colour_marginals(&mut r, &mut subspaces)?;
-    }
+        read_exemplar(&mut r, subspaces.len())?
+    } else {
+        None
+    };
     r.finish()?;
     MaterialModel::new(MaterialParts {
         views,
@@ -453,6 +501,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         cluster_table,
         subspaces,
         range_map,
+        exemplar,
     })
     .map_err(|e| e.to_string())
 }
@@ -539,6 +588,35 @@ fn read_colour_marginals(r: &mut Reader, subspaces: &mut [SubspaceModel]) -> Par
         s.colour_marginals = Some(ColourMarginals { tables });
     }
     Ok(())
+}
+
+/// Reads the version 3 structure exemplar (see [`write_colour`]), if any.
+fn read_exemplar(r: &mut Reader, clusters: usize) -> Parse<Option<Exemplar>> {
+    match r.u8()? {
+        0 => Ok(None),
+        1 => {
+            let (rows, cols) = (usize::from(r.u16()?), usize::from(r.u16()?));
+            if rows == 0 || cols == 0 {
+                return Err("empty exemplar".into());
+            }
+            let (lo, quantum) = (r.f32()?, r.f32()?);
+            if quantum < 0.0 {
+                return Err(format!("negative exemplar step {quantum}"));
+            }
+            r.ensure(rows * cols, 2, "exemplar")?;
+            let lightness = (0..rows * cols)
+                .map(|_| Ok(decode(lo, quantum, r.u16()?, "exemplar value")? as f32))
+                .collect::<Parse<Vec<f32>>>()?;
+            let gains = r.f32s(clusters)?.into_iter().map(|g| g as f32).collect();
+            Ok(Some(Exemplar {
+                rows,
+                cols,
+                lightness,
+                gains,
+            }))
+        }
+        f => Err(format!("unknown exemplar flag {f}")),
+    }
 }
 
 /// Writes a model file atomically.

@@ -130,6 +130,36 @@ pub struct MaterialParts {
     pub subspaces: Vec<SubspaceModel>,
     /// The surface relief, if estimated.
     pub range_map: Option<RangeMap>,
+    /// The structure exemplar, if stored (models without a range map).
+    pub exemplar: Option<Exemplar>,
+}
+
+/// A compact exemplar of the material's structure (issue 11: a photograph has no range map to
+/// carry it): the CIE L* of a crop of one subspace image, at the measured pixel scale. At
+/// synthesis it is quilted ([`crate::geometry::quilt`]) to the output size, and its detail
+/// finer than a patch replaces the MRF's in every subspace image's L*, scaled by that
+/// subspace's `gains[k]` (its own detail contrast over the exemplar's); the MRF keeps the
+/// coarser variation, so the result repeats on no grid. One exemplar for all subspaces keeps
+/// the structure the same surface under every light.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Exemplar {
+    /// Rows of the crop.
+    pub rows: usize,
+    /// Columns of the crop.
+    pub cols: usize,
+    /// L*, row-major, `rows * cols` values.
+    pub lightness: Vec<f32>,
+    /// Detail contrast of each subspace image over the exemplar's, one per subspace.
+    pub gains: Vec<f32>,
+}
+
+impl Exemplar {
+    /// The crop as a plane.
+    pub fn samples(&self) -> Array2<f64> {
+        Array2::from_shape_fn((self.rows, self.cols), |(r, c)| {
+            f64::from(self.lightness[r * self.cols + c])
+        })
+    }
 }
 
 /// A whole material: clustering, subspace models and range map. Written as `.btfm`. Only
@@ -230,6 +260,24 @@ impl MaterialModel {
                 ));
             }
         }
+        if let Some(e) = &parts.exemplar
+            && (e.rows == 0
+                || e.cols == 0
+                || e.rows > MAX_COUNT
+                || e.cols > MAX_COUNT
+                || e.lightness.len() != e.rows * e.cols
+                || e.gains.len() != clusters
+                || e.lightness.iter().any(|v| !v.is_finite())
+                || e.gains.iter().any(|g| !(g.is_finite() && *g >= 0.0)))
+        {
+            return bad(format!(
+                "exemplar of {} values as {}x{} with {} gains for {clusters} subspaces (all finite, gains >= 0)",
+                e.lightness.len(),
+                e.rows,
+                e.cols,
+                e.gains.len()
+            ));
+        }
         if let Some(r) = &parts.range_map {
             let sides = [r.rows, r.cols, r.step];
             if sides.iter().any(|&n| n == 0 || n > MAX_COUNT) || r.heights.len() != r.rows * r.cols
@@ -295,6 +343,11 @@ impl MaterialModel {
     /// The surface relief, if estimated.
     pub fn range_map(&self) -> Option<&RangeMap> {
         self.parts.range_map.as_ref()
+    }
+
+    /// The structure exemplar, if the model stores one.
+    pub fn exemplar(&self) -> Option<&Exemplar> {
+        self.parts.exemplar.as_ref()
     }
 
     /// Number of pyramid levels (the same in every subspace).
@@ -369,6 +422,7 @@ mod tests {
             cluster_table: (0..6).map(|i| i % 2).collect(),
             subspaces: vec![flat(2, Car2dModel::constant(0.5)); 2],
             range_map: None,
+            exemplar: None,
         }
     }
 
@@ -436,6 +490,15 @@ mod tests {
             p.subspaces[0].colour_marginals.as_mut().unwrap().tables[3][7] = f64::NAN;
         });
         assert!(e.contains("subspace 0: colour tables are not"), "{e}");
+        let e = refused(|p| {
+            p.exemplar = Some(Exemplar {
+                rows: 2,
+                cols: 2,
+                lightness: vec![50.0; 4],
+                gains: vec![1.0],
+            })
+        });
+        assert!(e.contains("with 1 gains for 2 subspaces"), "{e}");
     }
 
     #[test]

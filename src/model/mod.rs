@@ -6,4 +6,6 @@ mod material;
 
 pub use crate::mrf::{AnyLevels, ModelKind};
 pub use error::{ModelError, Result};
-pub use material::{BandMarginals, MaterialModel, MaterialParts, RangeMap, SubspaceModel};
+pub use material::{
+    BandMarginals, Exemplar, MaterialModel, MaterialParts, RangeMap, SubspaceModel,
+};

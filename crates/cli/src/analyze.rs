@@ -25,6 +25,7 @@ struct AnalyzeReport<'a> {
     range_map: Option<RangeMapSize>,
     band_marginal_bytes: usize,
     colour_marginal_bytes: usize,
+    exemplar_bytes: usize,
     repairs: &'a [AnalysisRepair],
     warnings: &'a [String],
 }
@@ -83,8 +84,16 @@ pub struct Args {
     /// colours the material never shows (saturated specks on dark pixels).
     #[arg(long)]
     no_colour_matching: bool,
+    /// Largest side of the structure exemplar (pixels; 0: none) stored when there is no range
+    /// map, e.g. for a photograph: the L* of a centred crop, 2 bytes a pixel (32 KiB at the
+    /// default 128), quilted at synthesis to carry the material's structure finer than a third
+    /// of the crop, which second-order MRF models lose (cells, grains, stones); the MRF keeps the
+    /// coarser variation.
+    #[arg(long, default_value_t = btfmrf::analysis::EXEMPLAR_SIDE)]
+    exemplar: usize,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
-    /// clusters, levels, band_marginal_bytes, colour_marginal_bytes, repairs, warnings.
+    /// clusters, levels, band_marginal_bytes, colour_marginal_bytes, exemplar_bytes, repairs,
+    /// warnings.
     #[arg(long)]
     json: bool,
 }
@@ -121,6 +130,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         range_map: !args.no_range_map,
         band_marginals: args.band_marginals,
         colour_matching: !args.no_colour_matching,
+        exemplar_side: args.exemplar,
         ..AnalysisOptions::default()
     };
     let (model, report) = analyze(&btf, &options, &Bar::new(global))?;
@@ -147,6 +157,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             }),
             band_marginal_bytes: format::band_marginal_bytes(&model),
             colour_marginal_bytes: format::colour_marginal_bytes(&model),
+            exemplar_bytes: format::exemplar_bytes(&model),
             repairs: &report.repairs,
             warnings: &report.warnings,
         })?;

@@ -188,6 +188,7 @@ mod tests {
             cluster_table,
             subspaces: vec![flat; 4],
             range_map: None,
+            exemplar: None,
         })
         .unwrap()
     }
