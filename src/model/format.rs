@@ -194,15 +194,15 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
     }
 }
 
-/// Bytes the band quantile tables take in the file (0 without them).
+/// Bytes the band quantile tables take in the file (0 unless every subspace has them: the
+/// writer writes all or none).
 pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
-    let tables: usize = model
-        .subspaces()
-        .iter()
-        .filter_map(|s| s.band_marginals.as_ref())
-        .map(|b| 3 * b.tables.len())
-        .sum();
-    tables * (8 + 2 * BAND_QUANTILES)
+    let subspaces = model.subspaces();
+    if subspaces.iter().all(|s| s.band_marginals.is_some()) {
+        subspaces.len() * model.levels() * 3 * (8 + 2 * BAND_QUANTILES)
+    } else {
+        0
+    }
 }
 
 /// Bytes the structure exemplar takes in the file (0 without one).
