@@ -214,13 +214,31 @@ fn choose(
         return (y, x, 0.0);
     }
     let n = known.len() as f64;
+    // A patch that fits inside the source (the usual case) reads it at a fixed offset from the
+    // candidate's corner: flat indices, no wrap-around (the same sums, in the same order).
+    let flat = source
+        .as_slice()
+        .filter(|_| hr <= sr && hc <= sc)
+        .map(|data| {
+            let known: Vec<(usize, f64)> = known.iter().map(|&(y, x, v)| (y * sc + x, v)).collect();
+            (data, known)
+        });
     let scored: Vec<(f64, f64)> = candidates
         .par_iter()
         .map(|&(y0, x0)| {
-            let (sum, sq) = known.iter().fold((0.0, 0.0), |(sum, sq), &(y, x, v)| {
-                let d = v - source[((y0 + y) % sr, (x0 + x) % sc)];
-                (sum + d, sq + d * d)
-            });
+            let (sum, sq) = match &flat {
+                Some((data, known)) => {
+                    let corner = &data[y0 * sc + x0..];
+                    known.iter().fold((0.0, 0.0), |(sum, sq), &(at, v)| {
+                        let d = v - corner[at];
+                        (sum + d, sq + d * d)
+                    })
+                }
+                None => known.iter().fold((0.0, 0.0), |(sum, sq), &(y, x, v)| {
+                    let d = v - source[((y0 + y) % sr, (x0 + x) % sc)];
+                    (sum + d, sq + d * d)
+                }),
+            };
             ((sq - sum * sum / n).max(0.0), sum / n)
         })
         .collect();

@@ -89,7 +89,7 @@ pub struct Args {
     /// default 128), quilted at synthesis to carry the material's structure finer than a third
     /// of the crop, which second-order MRF models lose (cells, grains, stones); the MRF keeps the
     /// coarser variation. The quilt costs synthesis time: a 768x768 image of a photograph's
-    /// model took 2.3 s with it and 0.25 s without on a 2-core machine.
+    /// model took 0.8-1.0 s with it and 0.25 s without on a 2-core machine.
     #[arg(long, default_value_t = btfmrf::analysis::EXEMPLAR_SIDE)]
     exemplar: usize,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
