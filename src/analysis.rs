@@ -52,6 +52,9 @@ pub struct AnalysisOptions {
 
 /// Default largest side of the structure exemplar, pixels (a 128 x 128 crop: 32 KiB).
 pub const EXEMPLAR_SIDE: usize = 128;
+/// The largest exemplar side accepted: its 2 bytes a pixel must stay well inside a model
+/// file's payload limit.
+pub const MAX_EXEMPLAR_SIDE: usize = 1024;
 
 /// Largest stored range-map side, samples; larger maps are averaged down (a 128 x 128 map is
 /// 32 KiB in the model file).
@@ -169,6 +172,15 @@ pub fn analyze(
         return Err(ModelError::parameter(
             "--levels",
             format!("{levels} is outside 1..=16"),
+        ));
+    }
+    if options.exemplar_side > MAX_EXEMPLAR_SIDE {
+        return Err(ModelError::parameter(
+            "--exemplar",
+            format!(
+                "{} is above {MAX_EXEMPLAR_SIDE} (2 MiB of the model file)",
+                options.exemplar_side
+            ),
         ));
     }
     let clustering = SubspaceClustering::fit(

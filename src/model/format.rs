@@ -455,11 +455,11 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             if rows == 0 || cols == 0 || step == 0 {
                 return Err("empty range map".into());
             }
-            let (lo, quantum) = (r.f32()?, r.f32()?);
-            r.ensure(rows * cols, 2, "range map")?;
-            let heights = (0..rows * cols)
-                .map(|_| Ok(decode(lo, quantum, r.u16()?, "range map height")? as f32))
-                .collect::<Parse<Vec<f32>>>()?;
+            let heights = read_quantised(&mut r, rows * cols, "range map height")?
+                .1
+                .into_iter()
+                .map(|h| h as f32)
+                .collect();
             let strength = if flag == 2 {
                 let n = usize::from(r.u16()?);
                 if n != lights.len() {
@@ -550,15 +550,24 @@ fn read_colour(r: &mut Reader, subspaces: &mut [SubspaceModel], levels: usize) -
     Ok(())
 }
 
-/// Reads a quantised table of `count` values (see [`write_quantised`]): finite, non-decreasing.
-fn read_table(r: &mut Reader, count: usize, what: &str) -> Parse<Vec<f64>> {
+/// Reads `count` quantised values (see [`write_quantised`]), each within single precision:
+/// (step, values); the codes are checked to fit before anything is allocated.
+fn read_quantised(r: &mut Reader, count: usize, what: &str) -> Parse<(f64, Vec<f64>)> {
     let (lo, quantum) = (r.f32()?, r.f32()?);
+    r.ensure(count, 2, what)?;
+    let values = (0..count)
+        .map(|_| decode(lo, quantum, r.u16()?, what))
+        .collect::<Parse<_>>()?;
+    Ok((quantum, values))
+}
+
+/// Reads a quantised table of `count` values (see [`write_quantised`]): a step >= 0, finite,
+/// non-decreasing.
+fn read_table(r: &mut Reader, count: usize, what: &str) -> Parse<Vec<f64>> {
+    let (quantum, table) = read_quantised(r, count, what)?;
     if quantum < 0.0 {
         return Err(format!("negative {what} step {quantum}"));
     }
-    let table = (0..count)
-        .map(|_| decode(lo, quantum, r.u16()?, what))
-        .collect::<Parse<Vec<f64>>>()?;
     if table.windows(2).any(|w| w[1] < w[0]) {
         return Err(format!("{what} table is not increasing"));
     }
@@ -599,14 +608,11 @@ fn read_exemplar(r: &mut Reader, clusters: usize) -> Parse<Option<Exemplar>> {
             if rows == 0 || cols == 0 {
                 return Err("empty exemplar".into());
             }
-            let (lo, quantum) = (r.f32()?, r.f32()?);
+            let (quantum, values) = read_quantised(r, rows * cols, "exemplar value")?;
             if quantum < 0.0 {
                 return Err(format!("negative exemplar step {quantum}"));
             }
-            r.ensure(rows * cols, 2, "exemplar")?;
-            let lightness = (0..rows * cols)
-                .map(|_| Ok(decode(lo, quantum, r.u16()?, "exemplar value")? as f32))
-                .collect::<Parse<Vec<f32>>>()?;
+            let lightness = values.into_iter().map(|v| v as f32).collect();
             let gains = r.f32s(clusters)?.into_iter().map(|g| g as f32).collect();
             Ok(Some(Exemplar {
                 rows,

@@ -237,23 +237,14 @@ impl Car2dModel {
         if needed == 0 {
             return Array2::zeros((rows, cols));
         }
-        let (height, width) = if tileable {
-            (rows, cols)
-        } else {
-            (torus::padded(rows), torus::padded(cols))
-        };
         let field = torus::car2d(
-            (height, width),
+            torus::shape(rows, cols, tileable),
             noise,
             sigma,
             (offsets, &self.gamma),
             self.mean,
         );
-        if tileable {
-            field
-        } else {
-            torus::crop(field, rows, cols)
-        }
+        torus::cut(field, rows, cols, tileable)
     }
 }
 
@@ -275,13 +266,8 @@ impl BandModel for Car2dModel {
     }
 
     fn noise_len(rows: usize, cols: usize, tileable: bool) -> usize {
-        if rows == 0 || cols == 0 {
-            0
-        } else if tileable {
-            rows * cols
-        } else {
-            torus::padded(rows) * torus::padded(cols)
-        }
+        let (height, width) = torus::shape(rows, cols, tileable);
+        height * width
     }
 
     fn synthesize_from(

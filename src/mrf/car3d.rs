@@ -252,43 +252,6 @@ impl Car3dModel {
         }
         Matrix3::from_diagonal(&s.diagonal().map(|v| v.max(0.0).sqrt()))
     }
-
-    /// [`BandModel::synthesize_from`].
-    fn joint_from(
-        &self,
-        rows: usize,
-        cols: usize,
-        noise: &[f32],
-        tileable: bool,
-    ) -> Array3<f64> {
-        let needed = Self::noise_len(rows, cols, tileable);
-        require(noise, needed);
-        if rows == 0 || cols == 0 {
-            return Array3::zeros((3, rows, cols));
-        }
-        let offsets = causal(self.order as usize);
-        let l = self.noise_factor();
-        let (height, width) = if tileable {
-            (rows, cols)
-        } else {
-            (torus::padded(rows), torus::padded(cols))
-        };
-        // e_r = L w_r: three noise values per site, row-major.
-        let mut e: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(height * width));
-        for w in noise[..needed].chunks_exact(3) {
-            for (p, plane) in e.iter_mut().enumerate() {
-                let v: f64 = (0..=p).map(|q| l[(p, q)] * f64::from(w[q])).sum();
-                plane.push(v as f32);
-            }
-        }
-        let blocks: Vec<[f64; 9]> = (0..offsets.len())
-            .map(|k| std::array::from_fn(|q| self.a[9 * k + q]))
-            .collect();
-        let planes = torus::car3d((height, width), &e, (offsets, &blocks), self.mean)
-            .map(|y| if tileable { y } else { torus::crop(y, rows, cols) });
-        let views = planes.each_ref().map(|p| p.view());
-        ndarray::stack(ndarray::Axis(0), &views).expect("equal channel shapes")
-    }
 }
 
 /// A `(3, rows, cols)` sample solved exactly on a torus by the DFT (see [`torus`]): the
@@ -317,7 +280,29 @@ impl BandModel for Car3dModel {
         noise: &[f32],
         tileable: bool,
     ) -> Array3<f64> {
-        self.joint_from(rows, cols, noise, tileable)
+        let needed = Self::noise_len(rows, cols, tileable);
+        require(noise, needed);
+        if rows == 0 || cols == 0 {
+            return Array3::zeros((3, rows, cols));
+        }
+        let offsets = causal(self.order as usize);
+        let l = self.noise_factor();
+        let (height, width) = torus::shape(rows, cols, tileable);
+        // e_r = L w_r: three noise values per site, row-major.
+        let mut e: [Vec<f32>; 3] = std::array::from_fn(|_| Vec::with_capacity(height * width));
+        for w in noise[..needed].chunks_exact(3) {
+            for (p, plane) in e.iter_mut().enumerate() {
+                let v: f64 = (0..=p).map(|q| l[(p, q)] * f64::from(w[q])).sum();
+                plane.push(v as f32);
+            }
+        }
+        let blocks: Vec<[f64; 9]> = (0..offsets.len())
+            .map(|k| std::array::from_fn(|q| self.a[9 * k + q]))
+            .collect();
+        let planes = torus::car3d((height, width), &e, (offsets, &blocks), self.mean)
+            .map(|y| torus::cut(y, rows, cols, tileable));
+        let views = planes.each_ref().map(|p| p.view());
+        ndarray::stack(ndarray::Axis(0), &views).expect("equal channel shapes")
     }
 
     fn write(&self, w: &mut Writer) {

@@ -75,9 +75,19 @@ pub(super) fn row_phases(rows: usize) -> Vec<Complex64> {
 /// beyond the correlation length of the repaired models, so the cut edges are unrelated.
 pub const MARGIN: usize = 32;
 
+/// The torus a `rows x cols` field is solved on: its own size when `tileable`, else
+/// [`padded`] on both axes.
+pub(crate) fn shape(rows: usize, cols: usize, tileable: bool) -> (usize, usize) {
+    if tileable {
+        (rows, cols)
+    } else {
+        (padded(rows), padded(cols))
+    }
+}
+
 /// Side of the torus a plain field of `n` samples is cut from: `n + 2 MARGIN` rounded up to a
 /// size whose prime factors are at most 7, which the FFT handles fast (0 for 0).
-pub(crate) fn padded(n: usize) -> usize {
+fn padded(n: usize) -> usize {
     if n == 0 {
         return 0;
     }
@@ -94,8 +104,12 @@ pub(crate) fn padded(n: usize) -> usize {
         .expect("smooth numbers are unbounded")
 }
 
-/// The `rows x cols` middle of a field from a [`padded`] torus.
-pub(crate) fn crop(field: Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
+/// The `rows x cols` field from one solved on [`shape`]: the whole torus when `tileable`,
+/// else its middle.
+pub(crate) fn cut(field: Array2<f64>, rows: usize, cols: usize, tileable: bool) -> Array2<f64> {
+    if tileable {
+        return field;
+    }
     field
         .slice(ndarray::s![MARGIN..MARGIN + rows, MARGIN..MARGIN + cols])
         .to_owned()

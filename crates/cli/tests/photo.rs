@@ -5,7 +5,7 @@
 
 mod common;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use btfmrf::eval::Yardstick;
 use common::{fails, ok, s, temp};
@@ -40,19 +40,7 @@ fn a_photograph_is_analysed_and_enlarged_end_to_end() {
         "-q",
     ]);
     let big = dir.path().join("big.png");
-    ok(&[
-        "synthesize",
-        s(&model),
-        "--size",
-        "1024",
-        "--view",
-        "0,0",
-        "--light",
-        "0,0",
-        "--out",
-        s(&big),
-        "-q",
-    ]);
+    enlarge(&model, &big);
     let enlarged = btfmrf::btf::io::read_image(&big).unwrap();
     assert_eq!(enlarged.dim(), (3, 1024, 1024));
     // The enlargement is judged against the photograph: farther than another crop (a
@@ -82,19 +70,7 @@ fn a_photograph_is_analysed_and_enlarged_end_to_end() {
     ]))
     .unwrap();
     assert_eq!(json["exemplar_bytes"], 0);
-    ok(&[
-        "synthesize",
-        s(&model),
-        "--size",
-        "1024",
-        "--view",
-        "0,0",
-        "--light",
-        "0,0",
-        "--out",
-        s(&big),
-        "-q",
-    ]);
+    enlarge(&model, &big);
     let plain = y
         .judge(&btfmrf::btf::io::read_image(&big).unwrap())
         .unwrap();
@@ -103,6 +79,25 @@ fn a_photograph_is_analysed_and_enlarged_end_to_end() {
         plain.structure_vs_random_phase > v.structure_vs_random_phase + 0.2,
         "{plain:?}"
     );
+}
+
+#[test]
+fn an_exemplar_too_large_for_a_model_file_is_refused() {
+    let dir = temp();
+    let out = dir.path().join("g.btfm");
+    let line = fails(&[
+        "analyze",
+        s(&gravel()),
+        "--exemplar",
+        "5000",
+        "--out",
+        s(&out),
+    ]);
+    assert!(
+        line.contains("--exemplar") && line.contains("1024"),
+        "{line}"
+    );
+    assert!(!out.exists());
 }
 
 #[test]
@@ -126,4 +121,21 @@ fn several_photographs_or_a_non_image_are_refused_with_what_was_expected() {
         "{line}"
     );
     assert!(!dir.path().join("x.btfm").exists());
+}
+
+/// Synthesizes `model` at 1024^2 under the zenith light into `out`.
+fn enlarge(model: &Path, out: &Path) {
+    ok(&[
+        "synthesize",
+        s(model),
+        "--size",
+        "1024",
+        "--view",
+        "0,0",
+        "--light",
+        "0,0",
+        "--out",
+        s(out),
+        "-q",
+    ]);
 }
