@@ -67,17 +67,72 @@ pub fn luminance(image: &Array3<f32>) -> Array2<f64> {
     c(0) * 0.2126 + c(1) * 0.7152 + c(2) * 0.0722
 }
 
+/// Linear luminance below which a pixel's chromaticity is mostly quantisation and compression
+/// noise: 10 of 255 sRGB levels, where one level moves a channel by 10 % or more.
+const CHROMA_NOISE: f64 = 0.003;
+
 /// Divides a measured image (registered with `heights`) by its shading factor under `l`
 /// (floored at 0.1), leaving what the relief does not explain: the texture that bump mapping
 /// is later applied to, so the measured relief shading is not applied twice. An unlit light
 /// leaves the image as it is.
+///
+/// A pixel brightened by `g = 1 / factor > 1` that was darker than [`CHROMA_NOISE`] keeps its
+/// luminance times `g`, but its chromaticity is drawn towards the image's mean chromaticity
+/// (own share `r + (1 - r) / g`, `r = (Y / CHROMA_NOISE)^2`): the noise of a deep shadow's
+/// colour would otherwise be lifted to a visible lightness (blue specks on a capture at a
+/// grazing light).
 pub fn remove_shading(image: &mut Array3<f32>, heights: &Array2<f64>, l: [f64; 3], strength: f64) {
-    let Some(factor) = shading_factor(heights, Edges::Clamp, l, strength) else {
-        return;
-    };
-    for mut channel in image.axis_iter_mut(Axis(0)) {
-        channel.zip_mut_with(&factor, |v, f| *v = (f64::from(*v) / f.max(FLOOR)) as f32);
+    if let Some(factor) = shading_factor(heights, Edges::Clamp, l, strength) {
+        divide_shading(image, &factor);
     }
+}
+
+/// Divides `image` by `factor` (same rows and columns, floored at [`FLOOR`]), drawing the
+/// chromaticity of brightened noise-dark pixels towards the mean as [`remove_shading`] says.
+fn divide_shading(image: &mut Array3<f32>, factor: &Array2<f64>) {
+    let lum = luminance(image);
+    let mean = mean_chromaticity(image, &lum);
+    let (_, h, w) = image.dim();
+    for y in 0..h {
+        for x in 0..w {
+            let g = 1.0 / factor[[y, x]].max(FLOOR);
+            let own = match mean {
+                Some(_) if g > 1.0 => {
+                    let r = (lum[[y, x]] / CHROMA_NOISE).powi(2).min(1.0);
+                    r + (1.0 - r) / g
+                }
+                _ => 1.0,
+            };
+            for c in 0..3 {
+                let v = f64::from(image[[c, y, x]]);
+                let toward = mean.map_or(v, |m| m[c] * lum[[y, x]]);
+                image[[c, y, x]] = (g * (own * v + (1.0 - own) * toward)) as f32;
+            }
+        }
+    }
+}
+
+/// The image's mean chromaticity as linear RGB of unit luminance: channel sums over the
+/// luminance sum of the pixels brighter than [`CHROMA_NOISE`] (of all pixels when none is);
+/// `None` for a black image.
+fn mean_chromaticity(image: &Array3<f32>, lum: &Array2<f64>) -> Option<[f64; 3]> {
+    let sums = |threshold: f64| {
+        let mut s = [0.0f64; 4];
+        for ((y, x), &l) in lum.indexed_iter() {
+            if l >= threshold {
+                for c in 0..3 {
+                    s[c] += f64::from(image[[c, y, x]]);
+                }
+                s[3] += l;
+            }
+        }
+        s
+    };
+    let mut s = sums(CHROMA_NOISE);
+    if s[3] <= 0.0 {
+        s = sums(f64::NEG_INFINITY);
+    }
+    (s[3] > 0.0).then(|| [s[0] / s[3], s[1] / s[3], s[2] / s[3]])
 }
 
 #[cfg(test)]
@@ -138,6 +193,52 @@ mod tests {
         remove_shading(&mut shaded, &h, l, 0.7);
         for (a, b) in shaded.iter().zip(&albedo) {
             assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn brightened_shadows_lose_their_noise_chroma_not_their_lightness() {
+        // Yellowish lit pixels, one bright and one noise-dark blue pixel in shadow (factor
+        // 0.2, brightened 5x) and one noise-dark blue pixel in the light (factor 1.5).
+        let mut image = Array3::from_shape_fn((3, 2, 4), |(c, _, _)| [0.5f32, 0.45, 0.2][c]);
+        let blue = [0.0004f32, 0.0004, 0.004];
+        for c in 0..3 {
+            image[[c, 1, 0]] = blue[c];
+            image[[c, 1, 1]] = blue[c];
+            image[[c, 1, 2]] = [0.3f32, 0.1, 0.05][c];
+        }
+        let mut factor = Array2::from_elem((2, 4), 1.0);
+        factor[[1, 0]] = 0.2;
+        factor[[1, 1]] = 1.5;
+        factor[[1, 2]] = 0.2;
+        let before = luminance(&image);
+        let mut out = image.clone();
+        divide_shading(&mut out, &factor);
+        let after = luminance(&out);
+        for ((y, x), &f) in factor.indexed_iter() {
+            let want = before[[y, x]] / f;
+            assert!(
+                (after[[y, x]] - want).abs() < 1e-6 * want.max(1e-3),
+                "{y},{x}"
+            );
+        }
+        let chroma = |im: &Array3<f32>, x: usize| {
+            let s: f32 = (0..3).map(|c| im[[c, 1, x]]).sum();
+            [im[[0, 1, x]] / s, im[[2, 1, x]] / s]
+        };
+        // The shadowed dark pixel moves over half the way to the mean chromaticity (its own
+        // share, 0.24 of its luminance, is a blue with a large channel sum).
+        let m = mean_chromaticity(&image, &before).unwrap();
+        let lit = [m[0] / m.iter().sum::<f64>(), m[2] / m.iter().sum::<f64>()].map(|v| v as f32);
+        let (was, now) = (chroma(&image, 0), chroma(&out, 0));
+        assert!(
+            (now[1] - lit[1]).abs() < 0.6 * (was[1] - lit[1]).abs(),
+            "{now:?}"
+        );
+        // Not brightened, or bright enough to trust: chromaticity kept.
+        for x in [1, 2] {
+            let (was, now) = (chroma(&image, x), chroma(&out, x));
+            assert!((was[0] - now[0]).abs() < 1e-5 && (was[1] - now[1]).abs() < 1e-5);
         }
     }
 
