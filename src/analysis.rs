@@ -11,10 +11,11 @@ use crate::decompose::marginals::{self, QuantileGrid, Quantiles};
 use crate::decompose::pyramid::auto_levels;
 use crate::decompose::stationarity::{NON_STATIONARY_SHARE, block_mean_share};
 use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceClustering};
+use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::{self, relight};
 use crate::model::{
-    AnyLevels, BandMarginals, Exemplar, MaterialModel, MaterialParts, ModelError, ModelKind,
-    RangeMap, Result, SubspaceModel, format,
+    AnyLevels, BandMarginals, Exemplar, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, ModelError,
+    ModelKind, PeriodicPart, RangeMap, Result, SubspaceModel, format,
 };
 use crate::mrf::{BandModel, KindVisitor, Levels, Repair, neighbourhood::MAX_ORDER};
 use crate::progress::Progress;
@@ -48,6 +49,10 @@ pub struct AnalysisOptions {
     /// Largest side of the structure exemplar stored when the model has no range map and
     /// works in CIE Lab (0: none; see [`crate::model::Exemplar`]). Default: [`EXEMPLAR_SIDE`].
     pub exemplar_side: usize,
+    /// Look for a lattice (a weave, tiles, a brick bond) and, when one is found, store each
+    /// subspace image's mean period and fit the MRF to what is left (see
+    /// [`crate::model::PeriodicPart`]). Default: true.
+    pub periodic: bool,
 }
 
 /// Default largest side of the structure exemplar, pixels (a 128 x 128 crop: 32 KiB).
@@ -73,6 +78,7 @@ impl Default for AnalysisOptions {
             band_marginals: false,
             colour_matching: true,
             exemplar_side: EXEMPLAR_SIDE,
+            periodic: true,
         }
     }
 }
@@ -217,21 +223,55 @@ pub fn analyze(
         let (ch, cw) = (h.min(options.exemplar_side), w.min(options.exemplar_side));
         ((h - ch) / 2, (w - cw) / 2, ch, cw)
     });
+    // A measured image (view v, light l) with the relief shading divided out where it is
+    // registered: the frontal view, or, once a lattice is found, every view of the rectified
+    // BTF (see below).
+    let deshaded = |mut image: Array3<f32>, v: usize, l: usize, all_views: bool| -> Array3<f32> {
+        if let (Some(map), Some(heights), Some(light)) =
+            (&range_map, &registered, btf.lights().get(l))
+            && (v == frontal || all_views)
+        {
+            relight::remove_shading(&mut image, heights, light.vector(), map.strength_of(l));
+        }
+        image
+    };
+    // Periods in single precision, as the file keeps them.
+    let lattice = match clustering.representatives.first() {
+        Some(&(v, l)) if options.periodic => {
+            let image = deshaded(btf.image(v, l)?, v, l, false);
+            lattice::detect(&ColourSpace::Lab.planes(&image)[0]).map(|t| Lattice {
+                rows: f64::from(t.rows as f32),
+                cols: f64::from(t.cols as f32),
+            })
+        }
+        _ => None,
+    };
+    // On a lattice the relief is laid in step with the colour's period, so shading left in an
+    // oblique view's representative would be applied twice, coherently (the knit at a 75
+    // degree light came out 27 % too dark); a quilted relief falls anywhere and leaves it to
+    // average out. So with a lattice every view is de-shaded: the rectified BTF shows each
+    // texel's surface point at the same place in every view, up to parallax.
+    let all_views = lattice.is_some();
+    let samples = lattice.map(|t| [t.rows, t.cols].map(tile_samples));
     progress.start("fitting models", clustering.clusters() as u64);
-    type Fitted = (SubspaceModel, Vec<AnalysisRepair>, f64, Option<Array2<f64>>);
+    type Fitted = (
+        SubspaceModel,
+        Vec<AnalysisRepair>,
+        f64,
+        Option<Array2<f64>>,
+        Option<Vec<f32>>,
+    );
     let fitted: Vec<Fitted> = clustering
         .representatives
         .par_iter()
         .enumerate()
         .map(|(k, &(v, l))| {
-            let mut image = btf.image(v, l)?;
-            let share = block_mean_share(&image);
-            if let (Some(map), Some(heights), Some(light)) =
-                (&range_map, &registered, btf.lights().get(l))
-                && v == frontal
-            {
-                relight::remove_shading(&mut image, heights, light.vector(), map.strength_of(l));
-            }
+            let measured = btf.image(v, l)?;
+            let share = block_mean_share(&measured);
+            let mut image = deshaded(measured, v, l, all_views);
+            let tile = lattice
+                .zip(samples)
+                .map(|(t, samples)| divide_by_period(&mut image, &t, samples));
             let lightness = crop.map(|(y0, x0, ch, cw)| {
                 let [l, _, _] = ColourSpace::Lab.planes(&image);
                 l.slice(ndarray::s![y0..y0 + ch, x0..x0 + cw]).to_owned()
@@ -259,6 +299,7 @@ pub fn analyze(
                 notes,
                 share,
                 lightness,
+                tile,
             ))
         })
         .collect::<Result<_>>()?;
@@ -266,13 +307,25 @@ pub fn analyze(
     let mut subspaces = Vec::with_capacity(fitted.len());
     let mut shares = Vec::with_capacity(fitted.len());
     let mut crops = Vec::with_capacity(fitted.len());
-    for (s, notes, share, lightness) in fitted {
+    let mut tiles = Vec::with_capacity(fitted.len());
+    for (s, notes, share, lightness, tile) in fitted {
         subspaces.push(s);
         report.repairs.extend(notes);
         shares.push(share);
         crops.extend(lightness);
+        tiles.extend(tile);
     }
     let exemplar = exemplar_from(&crops);
+    let periodic = lattice.zip(samples).map(|(t, [rows, cols])| PeriodicPart {
+        lattice: t,
+        rows,
+        cols,
+        tiles,
+        heights: registered.as_ref().map(|h| {
+            let period = lattice::mean_tile(h, &t, [rows, cols]);
+            format::as_stored(&period.iter().map(|&v| v as f32).collect::<Vec<_>>())
+        }),
+    });
     report.warnings.extend(stationarity_warning(shares));
     let model = MaterialModel::new(MaterialParts {
         views: btf.views().clone(),
@@ -283,8 +336,87 @@ pub fn analyze(
         subspaces,
         range_map,
         exemplar,
+        periodic,
     })?;
     Ok((model, report))
+}
+
+/// Samples a stored tile keeps along an axis whose period is `period` pixels: one a pixel, at
+/// most [`MAX_TILE_SAMPLES`].
+fn tile_samples(period: f64) -> usize {
+    (period.round() as usize).clamp(1, MAX_TILE_SAMPLES)
+}
+
+/// The share of the tile's mean luminance below which the divisor is floored: the dark gaps
+/// of a weave would otherwise turn their noise into huge ratios.
+const PERIOD_FLOOR: f64 = 0.05;
+
+/// Replaces `image` (linear RGB) by its luminance over that of its mean period under
+/// `lattice` (tiled over it), grey, and returns the period as the model stores it (`3 * rows *
+/// cols` values, channel-major; quantised as the file keeps it, so a model synthesizes the same
+/// before and after it is written). The ratio is grey because a per-channel ratio turned every
+/// misregistered thread edge (a red pixel over a cream mean) into a colour speck at synthesis;
+/// the colour comes from the period, the MRF adds the brightness variation around it.
+fn divide_by_period(image: &mut Array3<f32>, lattice: &Lattice, samples: [usize; 2]) -> Vec<f32> {
+    let (_, h, w) = image.dim();
+    let mut period = Vec::with_capacity(3 * samples[0] * samples[1]);
+    for channel in image.outer_iter() {
+        let tile = lattice::mean_tile(&channel.mapv(f64::from), lattice, samples);
+        period.extend(tile.iter().map(|&v| v.max(0.0) as f32));
+    }
+    let stored = format::as_stored(&period);
+    let tile = Array3::from_shape_vec(
+        (3, samples[0], samples[1]),
+        stored.iter().map(|&v| f64::from(v)).collect(),
+    )
+    .expect("3 x samples values");
+    let tiled = stack(
+        Axis(0),
+        &tile
+            .outer_iter()
+            .map(|t| lattice::tiled(&t.to_owned(), lattice, h, w).mapv(|v| v as f32))
+            .collect::<Vec<_>>()
+            .iter()
+            .map(|t| t.view())
+            .collect::<Vec<_>>(),
+    )
+    .expect("three planes of one shape");
+    let (y_image, y_tile) = (relight::luminance(image), relight::luminance(&tiled));
+    let floor = PERIOD_FLOOR * y_tile.mean().unwrap_or(0.0) + f64::from(f32::MIN_POSITIVE);
+    let mut ratio = clamp_log_tails(&y_image / &y_tile.mapv(|t| t.max(floor)));
+    // Synthesis multiplies an independent ratio field by the tile, whose mean product is the
+    // product of the means: scaled so that it is the image's mean luminance.
+    let product = ratio.mean().unwrap_or(0.0) * y_tile.mean().unwrap_or(0.0);
+    if product > 0.0 {
+        ratio *= y_image.mean().unwrap_or(0.0) / product;
+    }
+    for mut channel in image.outer_iter_mut() {
+        channel.zip_mut_with(&ratio, |v, &r| *v = r as f32);
+    }
+    stored
+}
+
+/// Robust standard deviations of the log ratio beyond which a ratio is clamped.
+const RATIO_TAIL: f64 = 4.0;
+
+/// `ratio` (> 0) with its logarithm clamped to the median +- [`RATIO_TAIL`] robust standard
+/// deviations (1.4826 x the median absolute deviation). A near-regular texture's threads and
+/// joints wander around the mean lattice; where a gap falls on a thread of the mean period the
+/// ratio is extreme, and the MRF, which cannot place such values along the edges, would scatter
+/// them as isolated dark and bright dots.
+fn clamp_log_tails(ratio: Array2<f64>) -> Array2<f64> {
+    let logs: Vec<f64> = ratio
+        .iter()
+        .map(|&r| r.max(f64::MIN_POSITIVE).ln())
+        .collect();
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
+    let centre = median(logs.clone());
+    let spread = 1.4826 * median(logs.iter().map(|l| (l - centre).abs()).collect());
+    let (lo, hi) = (centre - RATIO_TAIL * spread, centre + RATIO_TAIL * spread);
+    ratio.mapv(|r| r.max(f64::MIN_POSITIVE).ln().clamp(lo, hi).exp())
 }
 
 /// The structure exemplar from the L* crops of the subspace images (none without crops): the

@@ -17,9 +17,10 @@ use crate::btf::{Direction, Weighted};
 use crate::decompose::marginals::{self, MarginalMap};
 use crate::decompose::{Border, ColourSpace, Pyramid};
 use crate::geometry::integrate::{Edges, normals_of_periodic};
+use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::relight::shading_factor;
 use crate::geometry::{detail_scale, quilt, resample_periodic, split_detail};
-use crate::model::{MaterialModel, ModelError, Result};
+use crate::model::{MaterialModel, ModelError, PeriodicPart, Result};
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
 
@@ -292,7 +293,18 @@ impl MaterialModel {
         if let Some(c) = &s.colour_marginals {
             c.transfer(&mut colours);
         }
-        Ok(s.kl.space.linear_image(&colours))
+        let mut image = s.kl.space.linear_image(&colours);
+        if let Some(p) = self.periodic()
+            && let Some(tile) = p.tile(k)
+        {
+            // The MRF made the stochastic ratio; the lattice's mean period brings the weave.
+            let lattice = output_lattice(p, o);
+            for (mut channel, tile) in image.axis_iter_mut(Axis(0)).zip(tile.outer_iter()) {
+                let tiled = lattice::tiled(&tile.to_owned(), &lattice, o.rows, o.cols);
+                channel.zip_mut_with(&tiled, |v, &t| *v = (f64::from(*v) * t) as f32);
+            }
+        }
+        Ok(image)
     }
 
     /// The measured (view, light) pairs around a requested pair and their weights: the 3
@@ -365,7 +377,7 @@ impl MaterialModel {
     /// An invalid size.
     pub fn synthesis_cache(&self, o: &SynthesisOptions) -> Result<SynthesisCache> {
         check(self, o)?;
-        let heights = self.range_heights(o.rows, o.cols, o.seed);
+        let heights = self.range_heights(o);
         Ok(self.empty_cache(o, heights, NoiseBank::kept()))
     }
 
@@ -452,7 +464,7 @@ impl MaterialModel {
         // The first image draws every band's noise (while the range map is resampled
         // beside it); the others reuse it, in parallel.
         let (heights, cache) = rayon::join(
-            || self.range_heights(o.rows, o.cols, o.seed),
+            || self.range_heights(o),
             || -> Result<SynthesisCache> {
                 // One image alone draws its noise and lets it go (at 4096^2 a GMRF's noise
                 // is over 500 MB); more than one keep it to share.
@@ -476,12 +488,20 @@ impl MaterialModel {
         Ok(cache)
     }
 
-    /// The range map over `rows` x `cols` output texels, in texels; `None` without a range
-    /// map. The stored map is quilted ([`quilt`], seeded by `seed`) onto a torus of about
-    /// `rows / step` x `cols / step` samples and resampled to the output, so the relief keeps
-    /// its measured structure, repeats on no grid, and the result tiles exactly at any size.
-    pub fn range_heights(&self, rows: usize, cols: usize, seed: u64) -> Option<Array2<f64>> {
+    /// The range map over the output's rows x cols texels, in texels; `None` without a range
+    /// map. The stored map is quilted ([`quilt`], seeded by the synthesis seed) onto a torus of
+    /// about `rows / step` x `cols / step` samples and resampled to the output, so the relief
+    /// keeps its measured structure, repeats on no grid, and the result tiles exactly at any
+    /// size. A near-regular material's relief is its mean period laid on the output lattice
+    /// instead, in step with the colour's.
+    pub fn range_heights(&self, o: &SynthesisOptions) -> Option<Array2<f64>> {
         let map = self.range_map()?;
+        let (rows, cols, seed) = (o.rows, o.cols, o.seed);
+        if let Some(p) = self.periodic()
+            && let Some(period) = p.height_tile()
+        {
+            return Some(lattice::tiled(&period, &output_lattice(p, o), rows, cols));
+        }
         let side = |n: usize| ((n as f64 / map.step as f64).round() as usize).max(1);
         let torus = quilt(
             &map.samples(),
@@ -522,6 +542,15 @@ impl MaterialModel {
             .iter()
             .map(|w| w.weight * map.strength_of(w.index))
             .sum())
+    }
+}
+
+/// The lattice on the output: the measured periods, on a torus the nearest ones that fit a
+/// whole number of times (so the weave wraps without a seam).
+fn output_lattice(p: &PeriodicPart, o: &SynthesisOptions) -> Lattice {
+    Lattice {
+        rows: lattice::output_period(p.lattice.rows, o.rows, o.tileable),
+        cols: lattice::output_period(p.lattice.cols, o.cols, o.tileable),
     }
 }
 

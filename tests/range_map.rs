@@ -269,6 +269,7 @@ fn every_rti_set_relights_like_its_photographs() {
 fn the_enlarged_range_map_is_not_a_grid_of_copies() {
     use btfmrf::analysis::{AnalysisOptions, analyze};
     use btfmrf::geometry::integrate::{Edges, shading};
+    use btfmrf::synthesis::SynthesisOptions;
     let btf = Btf::open("../shared/data/rti/clay-leaf").unwrap();
     let options = AnalysisOptions {
         clusters: 4,
@@ -276,12 +277,14 @@ fn the_enlarged_range_map_is_not_a_grid_of_copies() {
     };
     let (model, _) = analyze(&btf, &options, &NoProgress).unwrap();
     let n = 1024;
-    let h = model.range_heights(n, n, 1).unwrap();
-    assert_eq!(
-        h,
-        model.range_heights(n, n, 1).unwrap(),
-        "same seed, same map"
-    );
+    let o = SynthesisOptions {
+        rows: n,
+        cols: n,
+        seed: 1,
+        tileable: true,
+    };
+    let h = model.range_heights(&o).unwrap();
+    assert_eq!(h, model.range_heights(&o).unwrap(), "same seed, same map");
     let mut worst: (f64, usize) = (0.0, 0);
     for shift in 150..900 {
         let a = h.slice(ndarray::s![.., ..n - shift]).to_owned();

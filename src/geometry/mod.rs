@@ -2,6 +2,7 @@
 //! integrate to, its seamless enlargement, and the bump shading it gives under a light.
 
 pub mod integrate;
+pub mod lattice;
 pub mod photometric_stereo;
 pub mod quilt;
 pub mod relight;

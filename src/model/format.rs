@@ -4,13 +4,15 @@
 use std::path::Path;
 
 use super::material::{
-    BandMarginals, Exemplar, MaterialModel, MaterialParts, RangeMap, SubspaceModel,
+    BandMarginals, Exemplar, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, PeriodicPart,
+    RangeMap, SubspaceModel,
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
 use crate::decompose::colour_transfer::{ColourMarginals, DIRECTIONS};
 use crate::decompose::marginals::{BAND_QUANTILES, QUANTILES, QuantileGrid};
 use crate::decompose::{ColourSpace, KlBasis};
+use crate::geometry::lattice::Lattice;
 pub use crate::io::bytes::{Parse, Reader};
 use crate::io::envelope;
 use crate::mrf::{AnyLevels, BandModel, KindVisitor, Levels, LevelsVisitor, ModelKind};
@@ -18,8 +20,9 @@ use crate::mrf::{AnyLevels, BandModel, KindVisitor, Levels, LevelsVisitor, Model
 /// The four bytes every model file starts with.
 pub const MAGIC: [u8; 4] = *b"BTFM";
 /// The format version this library writes. Version 1 files (no colour space, no band
-/// marginals: linear RGB KL) and version 2 files (no joint colour tables) are still read.
-pub const VERSION: u16 = 3;
+/// marginals: linear RGB KL), version 2 files (no joint colour tables) and version 3 files (no
+/// periodic part) are still read.
+pub const VERSION: u16 = 4;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -192,6 +195,36 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
             }
         }
     }
+    write_periodic(w, model);
+}
+
+/// The version 4 periodic part: flag, periods, samples, the tiles and the range map's period.
+fn write_periodic(w: &mut Writer, model: &MaterialModel) {
+    let Some(p) = model.periodic() else {
+        w.u8(0);
+        return;
+    };
+    w.u8(1);
+    w.f32(p.lattice.rows);
+    w.f32(p.lattice.cols);
+    w.u8(p.rows as u8);
+    w.u8(p.cols as u8);
+    for tile in &p.tiles {
+        let values: Vec<f64> = tile.iter().map(|&v| f64::from(v)).collect();
+        write_quantised(w, &values, Storage::Single);
+    }
+    if let Some(h) = &p.heights {
+        let values: Vec<f64> = h.iter().map(|&v| f64::from(v)).collect();
+        write_quantised(w, &values, Storage::Single);
+    }
+}
+
+/// Bytes the periodic part takes in the file (1 without one).
+pub fn periodic_bytes(model: &MaterialModel) -> usize {
+    model.periodic().map_or(1, |p| {
+        let tile = 8 + 2 * p.rows * p.cols;
+        11 + p.tiles.len() * (8 + 3 * 2 * p.rows * p.cols) + p.heights.as_ref().map_or(0, |_| tile)
+    })
 }
 
 /// Bytes the band quantile tables take in the file (0 unless every subspace has them: the
@@ -492,6 +525,11 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     } else {
         None
     };
+    let periodic = if version >= 4 {
+        read_periodic(&mut r, subspaces.len(), range_map.is_some())?
+    } else {
+        None
+    };
     r.finish()?;
     MaterialModel::new(MaterialParts {
         views,
@@ -502,6 +540,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         subspaces,
         range_map,
         exemplar,
+        periodic,
     })
     .map_err(|e| e.to_string())
 }
@@ -622,6 +661,53 @@ fn read_exemplar(r: &mut Reader, clusters: usize) -> Parse<Option<Exemplar>> {
             }))
         }
         f => Err(format!("unknown exemplar flag {f}")),
+    }
+}
+
+/// Reads the version 4 periodic part (see [`write_periodic`]), if any; the range map's
+/// period is there exactly when the model has a range map.
+fn read_periodic(
+    r: &mut Reader,
+    clusters: usize,
+    with_heights: bool,
+) -> Parse<Option<PeriodicPart>> {
+    match r.u8()? {
+        0 => Ok(None),
+        1 => {
+            let lattice = Lattice {
+                rows: r.f32()?,
+                cols: r.f32()?,
+            };
+            let (rows, cols) = (usize::from(r.u8()?), usize::from(r.u8()?));
+            if !(1..=MAX_TILE_SAMPLES).contains(&rows) || !(1..=MAX_TILE_SAMPLES).contains(&cols) {
+                return Err(format!(
+                    "periodic tile of {rows} x {cols} samples (1..={MAX_TILE_SAMPLES} each)"
+                ));
+            }
+            let mut quantised = |count: usize, what: &str| -> Parse<Vec<f32>> {
+                let (quantum, values) = read_quantised(r, count, what)?;
+                if quantum < 0.0 {
+                    return Err(format!("negative {what} step {quantum}"));
+                }
+                Ok(values.into_iter().map(|v| v as f32).collect())
+            };
+            let tiles = (0..clusters)
+                .map(|_| quantised(3 * rows * cols, "periodic tile value"))
+                .collect::<Parse<Vec<_>>>()?;
+            let heights = if with_heights {
+                Some(quantised(rows * cols, "periodic height")?)
+            } else {
+                None
+            };
+            Ok(Some(PeriodicPart {
+                lattice,
+                rows,
+                cols,
+                tiles,
+                heights,
+            }))
+        }
+        f => Err(format!("unknown periodic part flag {f}")),
     }
 }
 

@@ -1,6 +1,6 @@
 //! The material model: everything needed to synthesize a BTF, a few tens of kilobytes.
 
-use ndarray::Array2;
+use ndarray::{Array2, Array3};
 
 use super::{ModelError, Result};
 use crate::btf::DirectionSet;
@@ -9,6 +9,7 @@ use crate::decompose::colour_transfer::{ColourMarginals, DIRECTIONS};
 use crate::decompose::marginals::BAND_QUANTILES;
 use crate::decompose::marginals::{QuantileGrid, Quantiles};
 use crate::decompose::pyramid::{Taps, apply_separable, pyramid_step};
+use crate::geometry::lattice::{Lattice, MIN_PERIOD};
 use crate::mrf::{AnyLevels, ModelKind};
 
 impl std::str::FromStr for ModelKind {
@@ -132,6 +133,52 @@ pub struct MaterialParts {
     pub range_map: Option<RangeMap>,
     /// The structure exemplar, if stored (models without a range map).
     pub exemplar: Option<Exemplar>,
+    /// The periodic part, if the material was found near-regular.
+    pub periodic: Option<PeriodicPart>,
+}
+
+/// Most samples per lattice period and axis a periodic tile keeps (larger periods are
+/// resampled to it): 32 x 32 x 3 values, 6 KB a subspace image.
+pub const MAX_TILE_SAMPLES: usize = 32;
+
+/// The periodic part of a near-regular material (issue 11; Haindl and Hatka's near-regular
+/// textures): per subspace image the mean over its lattice periods, in linear RGB, which the
+/// image was divided by before its MRF was fitted (the MRF models the stochastic ratio, the
+/// tile carries the weave); and the range map's mean period, which replaces the quilted range
+/// map so relief and colour keep one lattice.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PeriodicPart {
+    /// Periods along rows and columns, measured pixels.
+    pub lattice: Lattice,
+    /// Samples per period along rows (1..=[`MAX_TILE_SAMPLES`]).
+    pub rows: usize,
+    /// Samples per period along columns (1..=[`MAX_TILE_SAMPLES`]).
+    pub cols: usize,
+    /// Per subspace, `3 * rows * cols` linear RGB values (channel-major, then row-major),
+    /// finite and >= 0.
+    pub tiles: Vec<Vec<f32>>,
+    /// The range map's heights over one period (texels of the measured image), `rows * cols`
+    /// values, exactly when the model has a range map.
+    pub heights: Option<Vec<f32>>,
+}
+
+impl PeriodicPart {
+    /// Subspace `k`'s tile as (3, rows, cols).
+    pub fn tile(&self, k: usize) -> Option<Array3<f64>> {
+        let t = self.tiles.get(k)?;
+        Some(Array3::from_shape_fn(
+            (3, self.rows, self.cols),
+            |(c, y, x)| f64::from(t[(c * self.rows + y) * self.cols + x]),
+        ))
+    }
+
+    /// The range map's period as (rows, cols), if stored.
+    pub fn height_tile(&self) -> Option<Array2<f64>> {
+        let h = self.heights.as_ref()?;
+        Some(Array2::from_shape_fn((self.rows, self.cols), |(y, x)| {
+            f64::from(h[y * self.cols + x])
+        }))
+    }
 }
 
 /// A compact exemplar of the material's structure (issue 11: a photograph has no range map to
@@ -278,6 +325,34 @@ impl MaterialModel {
                 e.gains.len()
             ));
         }
+        if let Some(p) = &parts.periodic {
+            let period_ok = |v: f64| v.is_finite() && (MIN_PERIOD..=MAX_COUNT as f64).contains(&v);
+            let samples = 1..=MAX_TILE_SAMPLES;
+            if !(period_ok(p.lattice.rows)
+                && period_ok(p.lattice.cols)
+                && samples.contains(&p.rows)
+                && samples.contains(&p.cols)
+                && p.tiles.len() == clusters
+                && p.tiles.iter().all(|t| {
+                    t.len() == 3 * p.rows * p.cols && t.iter().all(|v| v.is_finite() && *v >= 0.0)
+                })
+                && p.heights.is_some() == parts.range_map.is_some()
+                && p.heights
+                    .as_ref()
+                    .is_none_or(|h| h.len() == p.rows * p.cols && h.iter().all(|v| v.is_finite())))
+            {
+                return bad(format!(
+                    "periodic part: periods {} x {} ({MIN_PERIOD}..={MAX_COUNT}), {} x {} samples (1..={MAX_TILE_SAMPLES}), {} tiles for {clusters} subspaces (3 x samples finite values >= 0), heights {} with range map {}",
+                    p.lattice.rows,
+                    p.lattice.cols,
+                    p.rows,
+                    p.cols,
+                    p.tiles.len(),
+                    p.heights.is_some(),
+                    parts.range_map.is_some()
+                ));
+            }
+        }
         if let Some(r) = &parts.range_map {
             let sides = [r.rows, r.cols, r.step];
             if sides.iter().any(|&n| n == 0 || n > MAX_COUNT) || r.heights.len() != r.rows * r.cols
@@ -348,6 +423,11 @@ impl MaterialModel {
     /// The structure exemplar, if the model stores one.
     pub fn exemplar(&self) -> Option<&Exemplar> {
         self.parts.exemplar.as_ref()
+    }
+
+    /// The periodic part, if the material was found near-regular.
+    pub fn periodic(&self) -> Option<&PeriodicPart> {
+        self.parts.periodic.as_ref()
     }
 
     /// Number of pyramid levels (the same in every subspace).
@@ -423,6 +503,7 @@ mod tests {
             subspaces: vec![flat(2, Car2dModel::constant(0.5)); 2],
             range_map: None,
             exemplar: None,
+            periodic: None,
         }
     }
 
@@ -499,6 +580,51 @@ mod tests {
             })
         });
         assert!(e.contains("with 1 gains for 2 subspaces"), "{e}");
+        let periodic = PeriodicPart {
+            lattice: Lattice {
+                rows: 8.0,
+                cols: 6.5,
+            },
+            rows: 2,
+            cols: 3,
+            tiles: vec![vec![0.5; 18]; 2],
+            heights: None,
+        };
+        assert!(
+            MaterialModel::new(MaterialParts {
+                periodic: Some(periodic.clone()),
+                ..parts()
+            })
+            .is_ok()
+        );
+        for broken in [
+            PeriodicPart {
+                tiles: vec![vec![0.5; 18]],
+                ..periodic.clone()
+            },
+            PeriodicPart {
+                tiles: vec![vec![0.5; 18], vec![-0.1; 18]],
+                ..periodic.clone()
+            },
+            PeriodicPart {
+                lattice: Lattice {
+                    rows: 2.0,
+                    cols: 6.5,
+                },
+                ..periodic.clone()
+            },
+            PeriodicPart {
+                rows: MAX_TILE_SAMPLES + 1,
+                ..periodic.clone()
+            },
+            PeriodicPart {
+                heights: Some(vec![0.0; 6]),
+                ..periodic.clone()
+            },
+        ] {
+            let e = refused(|p| p.periodic = Some(broken.clone()));
+            assert!(e.contains("periodic part"), "{e}");
+        }
     }
 
     #[test]

@@ -7,5 +7,6 @@ mod material;
 pub use crate::mrf::{AnyLevels, ModelKind};
 pub use error::{ModelError, Result};
 pub use material::{
-    BandMarginals, Exemplar, MaterialModel, MaterialParts, RangeMap, SubspaceModel,
+    BandMarginals, Exemplar, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, PeriodicPart,
+    RangeMap, SubspaceModel,
 };

@@ -26,6 +26,9 @@ struct AnalyzeReport<'a> {
     band_marginal_bytes: usize,
     colour_marginal_bytes: usize,
     exemplar_bytes: usize,
+    /// Periods (rows, columns; measured pixels) of the lattice found, if any.
+    lattice: Option<[f64; 2]>,
+    periodic_bytes: usize,
     repairs: &'a [AnalysisRepair],
     warnings: &'a [String],
 }
@@ -92,9 +95,17 @@ pub struct Args {
     /// model took 0.8-1.0 s with it and 0.25 s without on a 2-core machine.
     #[arg(long, default_value_t = btfmrf::analysis::EXEMPLAR_SIDE)]
     exemplar: usize,
+    /// Do not look for a lattice. By default a material that repeats along both image axes (a
+    /// weave, tiles, a brick bond: a clear autocorrelation peak at the period) keeps each
+    /// subspace image's mean period, at most 32 x 32 samples (6 KB a subspace image), laid on
+    /// the lattice at synthesis, and the MRF models only the variation around it; the range
+    /// map is then laid on the same lattice instead of quilted. Stochastic textures are not
+    /// affected.
+    #[arg(long)]
+    no_lattice: bool,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
-    /// clusters, levels, band_marginal_bytes, colour_marginal_bytes, exemplar_bytes, repairs,
-    /// warnings.
+    /// clusters, levels, band_marginal_bytes, colour_marginal_bytes, exemplar_bytes, lattice,
+    /// periodic_bytes, repairs, warnings.
     #[arg(long)]
     json: bool,
 }
@@ -132,6 +143,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         band_marginals: args.band_marginals,
         colour_matching: !args.no_colour_matching,
         exemplar_side: args.exemplar,
+        periodic: !args.no_lattice,
         ..AnalysisOptions::default()
     };
     let (model, report) = analyze(&btf, &options, &Bar::new(global))?;
@@ -159,6 +171,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             band_marginal_bytes: format::band_marginal_bytes(&model),
             colour_marginal_bytes: format::colour_marginal_bytes(&model),
             exemplar_bytes: format::exemplar_bytes(&model),
+            lattice: model.periodic().map(|p| [p.lattice.rows, p.lattice.cols]),
+            periodic_bytes: format::periodic_bytes(&model),
             repairs: &report.repairs,
             warnings: &report.warnings,
         })?;
@@ -168,6 +182,14 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                 "note: {} estimate(s) were repaired (--json lists all), e.g. {}",
                 report.repairs.len(),
                 report.repairs[0]
+            );
+        }
+        if let Some(p) = model.periodic() {
+            eprintln!(
+                "note: a lattice of {:.1} x {:.1} pixels was found; its mean period is stored ({}; --no-lattice turns it off)",
+                p.lattice.rows,
+                p.lattice.cols,
+                human_bytes(format::periodic_bytes(&model) as u64)
             );
         }
         emit(format!(

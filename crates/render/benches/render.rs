@@ -41,7 +41,7 @@ fn frames(c: &mut Criterion) {
         )
         .unwrap();
     let tables = MaterialTables::new(&model, &cache, None).unwrap();
-    let heights = model.range_heights(n, n, 1);
+    let heights = model.range_heights(cache.options());
     let material = GpuMaterial::new(
         &renderer.ctx,
         &renderer.mrf,

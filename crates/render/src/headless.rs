@@ -369,7 +369,7 @@ impl Renderer {
         let (rows, cols) = (cache.options().rows, cache.options().cols);
         let model = job.model;
         let heights = match job.mapping {
-            Mapping::Displacement => model.range_heights(rows, cols, cache.options().seed),
+            Mapping::Displacement => model.range_heights(cache.options()),
             Mapping::Bump | Mapping::Plain => None,
         };
         let tables =

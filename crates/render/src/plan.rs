@@ -189,6 +189,7 @@ mod tests {
             subspaces: vec![flat; 4],
             range_map: None,
             exemplar: None,
+            periodic: None,
         })
         .unwrap()
     }

@@ -145,7 +145,7 @@ impl App<'_> {
         )?;
         let tables = MaterialTables::new(model, &cache, None)?;
         let bump_material = GpuMaterial::new(&ctx, &pass, &cache, None, &tables)?;
-        let heights = model.range_heights(n, n, o.seed);
+        let heights = model.range_heights(cache.options());
         let displaced_material = GpuMaterial::new(&ctx, &pass, &cache, heights.as_ref(), &tables)?;
         let mut meshes = Vec::new();
         for kind in &o.meshes {
