@@ -172,8 +172,8 @@ impl Tally {
         md
     }
 
-    /// Writes `counts.md`, `counts.json` and `flagged.png` (when anything was flagged) to
-    /// `dir`.
+    /// Writes `counts.md`, `counts.json` and `flagged.png` (when anything was flagged; else
+    /// an old sheet is removed) to `dir`.
     fn write(&self, dir: &Path, title: &str) {
         std::fs::create_dir_all(dir).unwrap();
         let mut md = format!("# {title}\n\n{}\n", self.table());
@@ -212,7 +212,10 @@ impl Tally {
             .filter_map(|c| c.flagged.as_ref())
             .flat_map(|(m, s)| [m, s])
             .collect();
-        if !pairs.is_empty() {
+        if pairs.is_empty() {
+            // A sheet from an earlier run would read as this run's.
+            let _ = std::fs::remove_file(dir.join("flagged.png"));
+        } else {
             let rows: Vec<Vec<&Array3<f32>>> = pairs.chunks(8).map(<[_]>::to_vec).collect();
             let sheet = montage(&rows, 4);
             btfmrf::btf::io::write_image(&dir.join("flagged.png"), &sheet).unwrap();
