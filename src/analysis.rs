@@ -2,6 +2,7 @@
 //! light space, then for every subspace image decorrelate colour (KL, except for the 3D CAR),
 //! split into a Gaussian-Laplacian pyramid and fit one MRF per band.
 
+use nalgebra::{DMatrix, SymmetricEigen};
 use ndarray::{Array2, Array3, Axis, stack};
 use rayon::prelude::*;
 
@@ -14,8 +15,8 @@ use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceCl
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::{self, relight};
 use crate::model::{
-    AnyLevels, BandMarginals, Exemplar, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, ModelError,
-    ModelKind, PeriodicPart, RangeMap, Result, SubspaceModel, format,
+    AnyLevels, BandMarginals, Exemplar, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel,
+    MaterialParts, ModelError, ModelKind, PeriodicPart, RangeMap, Result, SubspaceModel, format,
 };
 use crate::mrf::{BandModel, KindVisitor, Levels, Repair, neighbourhood::MAX_ORDER};
 use crate::progress::Progress;
@@ -252,15 +253,37 @@ pub fn analyze(
     // average out. So with a lattice every view is de-shaded: the rectified BTF shows each
     // texel's surface point at the same place in every view, up to parallax.
     let all_views = lattice.is_some();
-    let samples = lattice.map(|t| [t.rows, t.cols].map(tile_samples));
+    let periodic = match lattice {
+        Some(t) => {
+            let samples = [t.rows, t.cols].map(tile_samples);
+            let periods = clustering
+                .representatives
+                .par_iter()
+                .map(|&(v, l)| {
+                    Ok(mean_period(
+                        &deshaded(btf.image(v, l)?, v, l, true),
+                        &t,
+                        samples,
+                    ))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let (basis, weights) = principal_periods(&periods);
+            Some(PeriodicPart {
+                lattice: t,
+                rows: samples[0],
+                cols: samples[1],
+                basis,
+                weights,
+                heights: registered.as_ref().map(|h| {
+                    let period = lattice::mean_tile(h, &t, samples);
+                    format::as_stored(&period.iter().map(|&v| v as f32).collect::<Vec<_>>())
+                }),
+            })
+        }
+        None => None,
+    };
     progress.start("fitting models", clustering.clusters() as u64);
-    type Fitted = (
-        SubspaceModel,
-        Vec<AnalysisRepair>,
-        f64,
-        Option<Array2<f64>>,
-        Option<Vec<f32>>,
-    );
+    type Fitted = (SubspaceModel, Vec<AnalysisRepair>, f64, Option<Array2<f64>>);
     let fitted: Vec<Fitted> = clustering
         .representatives
         .par_iter()
@@ -269,9 +292,9 @@ pub fn analyze(
             let measured = btf.image(v, l)?;
             let share = block_mean_share(&measured);
             let mut image = deshaded(measured, v, l, all_views);
-            let tile = lattice
-                .zip(samples)
-                .map(|(t, samples)| divide_by_period(&mut image, &t, samples));
+            if let Some(p) = &periodic {
+                divide_by_period(&mut image, p, k);
+            }
             let lightness = crop.map(|(y0, x0, ch, cw)| {
                 let [l, _, _] = ColourSpace::Lab.planes(&image);
                 l.slice(ndarray::s![y0..y0 + ch, x0..x0 + cw]).to_owned()
@@ -299,7 +322,6 @@ pub fn analyze(
                 notes,
                 share,
                 lightness,
-                tile,
             ))
         })
         .collect::<Result<_>>()?;
@@ -307,25 +329,13 @@ pub fn analyze(
     let mut subspaces = Vec::with_capacity(fitted.len());
     let mut shares = Vec::with_capacity(fitted.len());
     let mut crops = Vec::with_capacity(fitted.len());
-    let mut tiles = Vec::with_capacity(fitted.len());
-    for (s, notes, share, lightness, tile) in fitted {
+    for (s, notes, share, lightness) in fitted {
         subspaces.push(s);
         report.repairs.extend(notes);
         shares.push(share);
         crops.extend(lightness);
-        tiles.extend(tile);
     }
     let exemplar = exemplar_from(&crops);
-    let periodic = lattice.zip(samples).map(|(t, [rows, cols])| PeriodicPart {
-        lattice: t,
-        rows,
-        cols,
-        tiles,
-        heights: registered.as_ref().map(|h| {
-            let period = lattice::mean_tile(h, &t, [rows, cols]);
-            format::as_stored(&period.iter().map(|&v| v as f32).collect::<Vec<_>>())
-        }),
-    });
     report.warnings.extend(stationarity_warning(shares));
     let model = MaterialModel::new(MaterialParts {
         views: btf.views().clone(),
@@ -347,40 +357,107 @@ fn tile_samples(period: f64) -> usize {
     (period.round() as usize).clamp(1, MAX_TILE_SAMPLES)
 }
 
+/// Smallest linear value a stored period holds (its logarithm is stored): far below a
+/// visible level, far above where a logarithm loses meaning.
+const PERIOD_MIN: f64 = 1e-4;
+
+/// The logarithm of the mean period of `image` (linear RGB) under `lattice` on `samples`
+/// points per period: `3 * rows * cols` values, channel-major then row-major.
+fn mean_period(image: &Array3<f32>, lattice: &Lattice, samples: [usize; 2]) -> Vec<f64> {
+    image
+        .outer_iter()
+        .flat_map(|channel| {
+            lattice::mean_tile(&channel.mapv(f64::from), lattice, samples)
+                .into_iter()
+                .map(|v| v.max(PERIOD_MIN).ln())
+        })
+        .collect()
+}
+
+/// Share of the periods' variance around their mean that the stored deviations may leave out.
+const PERIOD_RESIDUAL: f64 = 1e-3;
+
+/// The subspace images' `periods` (logarithms) as the model stores them: their mean and the fewest principal
+/// deviations (at most [`MAX_PERIOD_COMPONENTS`]) that leave at most [`PERIOD_RESIDUAL`] of the
+/// variance around the mean, each quantised as the file keeps it, with each period's weights
+/// on them (its projections). Principal directions from the small Gram matrix of the periods.
+fn principal_periods(periods: &[Vec<f64>]) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let n = periods.len();
+    let len = periods.first().map_or(0, Vec::len);
+    let mut mean = vec![0.0; len];
+    for p in periods {
+        for (m, v) in mean.iter_mut().zip(p) {
+            *m += v / n as f64;
+        }
+    }
+    let deviations: Vec<Vec<f64>> = periods
+        .iter()
+        .map(|p| p.iter().zip(&mean).map(|(v, m)| v - m).collect())
+        .collect();
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let gram = DMatrix::from_fn(n, n, |i, j| dot(&deviations[i], &deviations[j]));
+    let eigen = SymmetricEigen::new(gram);
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
+    let total: f64 = eigen.eigenvalues.iter().map(|v| v.max(0.0)).sum();
+    let mut kept = Vec::new();
+    let mut captured = 0.0;
+    for &j in &order {
+        let lambda = eigen.eigenvalues[j];
+        if kept.len() == MAX_PERIOD_COMPONENTS
+            || captured >= (1.0 - PERIOD_RESIDUAL) * total
+            || lambda <= 1e-12 * total.max(f64::MIN_POSITIVE)
+        {
+            break;
+        }
+        captured += lambda;
+        // A unit direction in period space: the deviations combined by the eigenvector.
+        let mut direction = vec![0.0; len];
+        for (i, d) in deviations.iter().enumerate() {
+            let u = eigen.eigenvectors[(i, j)] / lambda.sqrt();
+            for (x, v) in direction.iter_mut().zip(d) {
+                *x += u * v;
+            }
+        }
+        kept.push(direction);
+    }
+    let stored = |v: &[f64]| format::as_stored(&v.iter().map(|&x| x as f32).collect::<Vec<_>>());
+    let mut basis = vec![stored(&mean)];
+    basis.extend(kept.iter().map(|d| stored(d)));
+    let wide: Vec<Vec<f64>> = basis[1..]
+        .iter()
+        .map(|b| b.iter().map(|&v| f64::from(v)).collect())
+        .collect();
+    let weights = deviations
+        .iter()
+        .map(|d| {
+            wide.iter()
+                .map(|b| (dot(d, b) / dot(b, b).max(f64::MIN_POSITIVE)) as f32)
+                .collect()
+        })
+        .collect();
+    (basis, weights)
+}
+
 /// The share of the tile's mean luminance below which the divisor is floored: the dark gaps
 /// of a weave would otherwise turn their noise into huge ratios.
 const PERIOD_FLOOR: f64 = 0.05;
 
-/// Replaces `image` (linear RGB) by its luminance over that of its mean period under
-/// `lattice` (tiled over it), grey, and returns the period as the model stores it (`3 * rows *
-/// cols` values, channel-major; quantised as the file keeps it, so a model synthesizes the same
-/// before and after it is written). The ratio is grey because a per-channel ratio turned every
+/// Replaces `image` (linear RGB) by its luminance over that of subspace `k`'s period in `part`
+/// (tiled over it), grey. The ratio is grey because a per-channel ratio turned every
 /// misregistered thread edge (a red pixel over a cream mean) into a colour speck at synthesis;
 /// the colour comes from the period, the MRF adds the brightness variation around it.
-fn divide_by_period(image: &mut Array3<f32>, lattice: &Lattice, samples: [usize; 2]) -> Vec<f32> {
+fn divide_by_period(image: &mut Array3<f32>, part: &PeriodicPart, k: usize) {
+    let Some(tile) = part.tile(k) else {
+        return;
+    };
     let (_, h, w) = image.dim();
-    let mut period = Vec::with_capacity(3 * samples[0] * samples[1]);
-    for channel in image.outer_iter() {
-        let tile = lattice::mean_tile(&channel.mapv(f64::from), lattice, samples);
-        period.extend(tile.iter().map(|&v| v.max(0.0) as f32));
-    }
-    let stored = format::as_stored(&period);
-    let tile = Array3::from_shape_vec(
-        (3, samples[0], samples[1]),
-        stored.iter().map(|&v| f64::from(v)).collect(),
-    )
-    .expect("3 x samples values");
-    let tiled = stack(
-        Axis(0),
-        &tile
-            .outer_iter()
-            .map(|t| lattice::tiled(&t.to_owned(), lattice, h, w).mapv(|v| v as f32))
-            .collect::<Vec<_>>()
-            .iter()
-            .map(|t| t.view())
-            .collect::<Vec<_>>(),
-    )
-    .expect("three planes of one shape");
+    let planes: Vec<Array2<f32>> = tile
+        .outer_iter()
+        .map(|t| lattice::tiled(&t.to_owned(), &part.lattice, h, w).mapv(|v| v as f32))
+        .collect();
+    let views: Vec<_> = planes.iter().map(|p| p.view()).collect();
+    let tiled = stack(Axis(0), &views).expect("three planes of one shape");
     let (y_image, y_tile) = (relight::luminance(image), relight::luminance(&tiled));
     let floor = PERIOD_FLOOR * y_tile.mean().unwrap_or(0.0) + f64::from(f32::MIN_POSITIVE);
     let mut ratio = clamp_log_tails(&y_image / &y_tile.mapv(|t| t.max(floor)));
@@ -393,7 +470,6 @@ fn divide_by_period(image: &mut Array3<f32>, lattice: &Lattice, samples: [usize;
     for mut channel in image.outer_iter_mut() {
         channel.zip_mut_with(&ratio, |v, &r| *v = r as f32);
     }
-    stored
 }
 
 /// Robust standard deviations of the log ratio beyond which a ratio is clamped.
@@ -591,4 +667,47 @@ where
         colour_marginals,
     };
     (subspace, fits.into_iter().filter_map(|f| f.1).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Reconstructs period `k` from the stored mean, deviations and weights.
+    fn rebuilt(basis: &[Vec<f32>], weights: &[Vec<f32>], k: usize) -> Vec<f64> {
+        let mut v: Vec<f64> = basis[0].iter().map(|&x| f64::from(x)).collect();
+        for (w, b) in weights[k].iter().zip(&basis[1..]) {
+            for (x, &y) in v.iter_mut().zip(b) {
+                *x += f64::from(*w) * f64::from(y);
+            }
+        }
+        v
+    }
+
+    #[test]
+    fn principal_periods_keep_the_deviations_the_periods_have() {
+        // Six periods: a common pattern, brightness and a colour-like second pattern varying.
+        let base = |i: usize| 0.5 + 0.3 * ((i * 7 % 11) as f64 / 11.0);
+        let other = |i: usize| ((i * 5 % 13) as f64 / 13.0) - 0.5;
+        let periods: Vec<Vec<f64>> = (0..6)
+            .map(|k| {
+                let (a, b) = (0.6 + 0.1 * k as f64, 0.05 * (k * k) as f64);
+                (0..48).map(|i| a * base(i) + b * other(i)).collect()
+            })
+            .collect();
+        let (basis, weights) = principal_periods(&periods);
+        assert_eq!(basis.len(), 3, "mean and two deviations");
+        assert_eq!(weights.len(), 6);
+        for (k, p) in periods.iter().enumerate() {
+            let worst = rebuilt(&basis, &weights, k)
+                .iter()
+                .zip(p)
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+            assert!(worst < 1e-3, "period {k}: {worst}");
+        }
+        // Equal periods need no deviation.
+        let (basis, weights) = principal_periods(&vec![periods[0].clone(); 4]);
+        assert_eq!(basis.len(), 1);
+        assert!(weights.iter().all(Vec::is_empty));
+    }
 }

@@ -4,8 +4,8 @@
 use std::path::Path;
 
 use super::material::{
-    BandMarginals, Exemplar, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, PeriodicPart,
-    RangeMap, SubspaceModel,
+    BandMarginals, Exemplar, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
+    PeriodicPart, RangeMap, SubspaceModel,
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
@@ -209,9 +209,15 @@ fn write_periodic(w: &mut Writer, model: &MaterialModel) {
     w.f32(p.lattice.cols);
     w.u8(p.rows as u8);
     w.u8(p.cols as u8);
-    for tile in &p.tiles {
-        let values: Vec<f64> = tile.iter().map(|&v| f64::from(v)).collect();
+    w.u8((p.basis.len() - 1) as u8);
+    for period in &p.basis {
+        let values: Vec<f64> = period.iter().map(|&v| f64::from(v)).collect();
         write_quantised(w, &values, Storage::Single);
+    }
+    for weights in &p.weights {
+        for &v in weights {
+            w.f32(f64::from(v));
+        }
     }
     if let Some(h) = &p.heights {
         let values: Vec<f64> = h.iter().map(|&v| f64::from(v)).collect();
@@ -222,8 +228,10 @@ fn write_periodic(w: &mut Writer, model: &MaterialModel) {
 /// Bytes the periodic part takes in the file (1 without one).
 pub fn periodic_bytes(model: &MaterialModel) -> usize {
     model.periodic().map_or(1, |p| {
-        let tile = 8 + 2 * p.rows * p.cols;
-        11 + p.tiles.len() * (8 + 3 * 2 * p.rows * p.cols) + p.heights.as_ref().map_or(0, |_| tile)
+        let heights = p.heights.as_ref().map_or(0, |_| 8 + 2 * p.rows * p.cols);
+        12 + p.basis.len() * (8 + 3 * 2 * p.rows * p.cols)
+            + 4 * p.weights.iter().map(Vec::len).sum::<usize>()
+            + heights
     })
 }
 
@@ -684,18 +692,28 @@ fn read_periodic(
                     "periodic tile of {rows} x {cols} samples (1..={MAX_TILE_SAMPLES} each)"
                 ));
             }
-            let mut quantised = |count: usize, what: &str| -> Parse<Vec<f32>> {
+            let components = usize::from(r.u8()?);
+            if components > MAX_PERIOD_COMPONENTS {
+                return Err(format!(
+                    "{components} principal periods (at most {MAX_PERIOD_COMPONENTS})"
+                ));
+            }
+            let quantised = |r: &mut Reader, count: usize, what: &str| -> Parse<Vec<f32>> {
                 let (quantum, values) = read_quantised(r, count, what)?;
                 if quantum < 0.0 {
                     return Err(format!("negative {what} step {quantum}"));
                 }
                 Ok(values.into_iter().map(|v| v as f32).collect())
             };
-            let tiles = (0..clusters)
-                .map(|_| quantised(3 * rows * cols, "periodic tile value"))
+            let basis = (0..=components)
+                .map(|_| quantised(r, 3 * rows * cols, "periodic tile value"))
+                .collect::<Parse<Vec<_>>>()?;
+            r.ensure(clusters, 4 * components, "periodic weights")?;
+            let weights = (0..clusters)
+                .map(|_| Ok(r.f32s(components)?.into_iter().map(|v| v as f32).collect()))
                 .collect::<Parse<Vec<_>>>()?;
             let heights = if with_heights {
-                Some(quantised(rows * cols, "periodic height")?)
+                Some(quantised(r, rows * cols, "periodic height")?)
             } else {
                 None
             };
@@ -703,7 +721,8 @@ fn read_periodic(
                 lattice,
                 rows,
                 cols,
-                tiles,
+                basis,
+                weights,
                 heights,
             }))
         }

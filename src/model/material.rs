@@ -138,14 +138,19 @@ pub struct MaterialParts {
 }
 
 /// Most samples per lattice period and axis a periodic tile keeps (larger periods are
-/// resampled to it): 32 x 32 x 3 values, 6 KB a subspace image.
+/// resampled to it).
 pub const MAX_TILE_SAMPLES: usize = 32;
 
+/// Most principal deviations the subspace images' periods are stored with.
+pub const MAX_PERIOD_COMPONENTS: usize = 8;
+
 /// The periodic part of a near-regular material (issue 11; Haindl and Hatka's near-regular
-/// textures): per subspace image the mean over its lattice periods, in linear RGB, which the
-/// image was divided by before its MRF was fitted (the MRF models the stochastic ratio, the
-/// tile carries the weave); and the range map's mean period, which replaces the quilted range
-/// map so relief and colour keep one lattice.
+/// textures): per subspace image the mean over its lattice periods, in linear RGB, whose
+/// luminance the image was divided by before its MRF was fitted (the MRF models the stochastic
+/// ratio, the period carries the weave); and the range map's mean period, which replaces the
+/// quilted range map so relief and colour keep one lattice. The subspace images' periods differ
+/// mostly by light, so they are stored as a mean period and a few principal deviations (6 KB
+/// each at 32 x 32 samples) with per-subspace weights, not one period each.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PeriodicPart {
     /// Periods along rows and columns, measured pixels.
@@ -154,22 +159,32 @@ pub struct PeriodicPart {
     pub rows: usize,
     /// Samples per period along columns (1..=[`MAX_TILE_SAMPLES`]).
     pub cols: usize,
-    /// Per subspace, `3 * rows * cols` linear RGB values (channel-major, then row-major),
-    /// finite and >= 0.
-    pub tiles: Vec<Vec<f32>>,
+    /// The mean period, then up to [`MAX_PERIOD_COMPONENTS`] principal deviations: `3 * rows *
+    /// cols` finite values each, natural logarithms of linear RGB (a light's gain is a shift
+    /// there, and every period stays positive), channel-major then row-major.
+    pub basis: Vec<Vec<f32>>,
+    /// Per subspace, one finite weight per principal deviation.
+    pub weights: Vec<Vec<f32>>,
     /// The range map's heights over one period (texels of the measured image), `rows * cols`
     /// values, exactly when the model has a range map.
     pub heights: Option<Vec<f32>>,
 }
 
 impl PeriodicPart {
-    /// Subspace `k`'s tile as (3, rows, cols).
+    /// Subspace `k`'s period as (3, rows, cols), linear RGB: the exponential of the mean plus
+    /// its weighted deviations (stored as logarithms).
     pub fn tile(&self, k: usize) -> Option<Array3<f64>> {
-        let t = self.tiles.get(k)?;
-        Some(Array3::from_shape_fn(
-            (3, self.rows, self.cols),
-            |(c, y, x)| f64::from(t[(c * self.rows + y) * self.cols + x]),
-        ))
+        let weights = self.weights.get(k)?;
+        let (mean, deviations) = self.basis.split_first()?;
+        let mut tile: Vec<f64> = mean.iter().map(|&v| f64::from(v)).collect();
+        for (w, d) in weights.iter().zip(deviations) {
+            for (t, &v) in tile.iter_mut().zip(d) {
+                *t += f64::from(*w) * f64::from(v);
+            }
+        }
+        Array3::from_shape_vec((3, self.rows, self.cols), tile)
+            .ok()
+            .map(|t| t.mapv(f64::exp))
     }
 
     /// The range map's period as (rows, cols), if stored.
@@ -328,26 +343,32 @@ impl MaterialModel {
         if let Some(p) = &parts.periodic {
             let period_ok = |v: f64| v.is_finite() && (MIN_PERIOD..=MAX_COUNT as f64).contains(&v);
             let samples = 1..=MAX_TILE_SAMPLES;
+            let values = 3 * p.rows * p.cols;
+            let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
             if !(period_ok(p.lattice.rows)
                 && period_ok(p.lattice.cols)
                 && samples.contains(&p.rows)
                 && samples.contains(&p.cols)
-                && p.tiles.len() == clusters
-                && p.tiles.iter().all(|t| {
-                    t.len() == 3 * p.rows * p.cols && t.iter().all(|v| v.is_finite() && *v >= 0.0)
-                })
+                && (1..=1 + MAX_PERIOD_COMPONENTS).contains(&p.basis.len())
+                && p.basis.iter().all(|b| b.len() == values && finite(b))
+                && p.weights.len() == clusters
+                && p.weights
+                    .iter()
+                    .all(|w| w.len() == p.basis.len() - 1 && finite(w))
                 && p.heights.is_some() == parts.range_map.is_some()
                 && p.heights
                     .as_ref()
-                    .is_none_or(|h| h.len() == p.rows * p.cols && h.iter().all(|v| v.is_finite())))
+                    .is_none_or(|h| h.len() == p.rows * p.cols && finite(h)))
             {
                 return bad(format!(
-                    "periodic part: periods {} x {} ({MIN_PERIOD}..={MAX_COUNT}), {} x {} samples (1..={MAX_TILE_SAMPLES}), {} tiles for {clusters} subspaces (3 x samples finite values >= 0), heights {} with range map {}",
+                    "periodic part: periods {} x {} ({MIN_PERIOD}..={MAX_COUNT}), {} x {} samples (1..={MAX_TILE_SAMPLES}), {} basis periods (1..={}) of 3 x samples finite values, {} weight rows for {clusters} subspaces (one finite weight per deviation), heights {} with range map {}",
                     p.lattice.rows,
                     p.lattice.cols,
                     p.rows,
                     p.cols,
-                    p.tiles.len(),
+                    p.basis.len(),
+                    1 + MAX_PERIOD_COMPONENTS,
+                    p.weights.len(),
                     p.heights.is_some(),
                     parts.range_map.is_some()
                 ));
@@ -587,23 +608,41 @@ mod tests {
             },
             rows: 2,
             cols: 3,
-            tiles: vec![vec![0.5; 18]; 2],
+            basis: vec![vec![0.5; 18], vec![0.1; 18]],
+            weights: vec![vec![1.0], vec![-6.0]],
             heights: None,
         };
+        let model = MaterialModel::new(MaterialParts {
+            periodic: Some(periodic.clone()),
+            ..parts()
+        })
+        .unwrap();
+        let p = model.periodic().unwrap();
+        // The exponential of the mean plus the weighted deviation.
         assert!(
-            MaterialModel::new(MaterialParts {
-                periodic: Some(periodic.clone()),
-                ..parts()
-            })
-            .is_ok()
+            p.tile(0)
+                .unwrap()
+                .iter()
+                .all(|&v| (v - 0.6f64.exp()).abs() < 1e-6)
         );
+        assert!(
+            p.tile(1)
+                .unwrap()
+                .iter()
+                .all(|&v| (v - (-0.1f64).exp()).abs() < 1e-6)
+        );
+        assert!(p.tile(2).is_none());
         for broken in [
             PeriodicPart {
-                tiles: vec![vec![0.5; 18]],
+                weights: vec![vec![1.0]],
                 ..periodic.clone()
             },
             PeriodicPart {
-                tiles: vec![vec![0.5; 18], vec![-0.1; 18]],
+                weights: vec![vec![1.0], vec![f32::NAN]],
+                ..periodic.clone()
+            },
+            PeriodicPart {
+                basis: vec![vec![0.5; 18], vec![0.1; 17]],
                 ..periodic.clone()
             },
             PeriodicPart {
