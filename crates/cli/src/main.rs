@@ -279,21 +279,50 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() -> ExitCode {
     allocator::keep_freed_memory();
-    on_interrupt_remove_temporaries();
-    match run() {
+    let runtime = private_runtime_dir();
+    on_interrupt_remove_temporaries(runtime.clone());
+    let code = match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", error_line(&e));
             exit_code(&e)
         }
+    };
+    if let Some(dir) = runtime {
+        let _ = std::fs::remove_dir_all(dir);
     }
+    code
 }
 
-/// SIGINT, SIGTERM or SIGHUP: delete the half-written outputs (`.btfmrf-partial-*`), say so on
-/// one error line, and exit with status 130 (the shell's code for an interrupted command).
-fn on_interrupt_remove_temporaries() {
+/// Without `XDG_RUNTIME_DIR` (a plain ssh or container shell), the Vulkan driver's Wayland
+/// probe prints "error: XDG_RUNTIME_DIR is invalid or not set in the environment." on every
+/// GPU start, which reads as a failure of a run that succeeded. When neither it nor a Wayland
+/// display is set, point it at a fresh private directory (mode 0700), removed at exit; the
+/// probe then finds no display and says nothing. `None` when the environment already has one.
+fn private_runtime_dir() -> Option<std::path::PathBuf> {
+    use std::os::unix::fs::DirBuilderExt;
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some()
+        || std::env::var_os("WAYLAND_DISPLAY").is_some()
+    {
+        return None;
+    }
+    let dir = std::env::temp_dir().join(format!("btfmrf-runtime-{}", std::process::id()));
+    std::fs::DirBuilder::new().mode(0o700).create(&dir).ok()?;
+    // SAFETY: called first thing in `main`, before any other thread exists that could read
+    // the environment concurrently.
+    unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
+    Some(dir)
+}
+
+/// SIGINT, SIGTERM or SIGHUP: delete the half-written outputs (`.btfmrf-partial-*`) and the
+/// private runtime directory, say so on one error line, and exit with status 130 (the shell's
+/// code for an interrupted command).
+fn on_interrupt_remove_temporaries(runtime: Option<std::path::PathBuf>) {
     // Without a handler the default action (exit, leaving temporaries) still applies.
-    let _ = ctrlc::set_handler(|| {
+    let _ = ctrlc::set_handler(move || {
+        if let Some(dir) = &runtime {
+            let _ = std::fs::remove_dir_all(dir);
+        }
         let removed = btfmrf::io::partial::remove_registered();
         eprintln!("error: interrupted; removed {removed} partial output(s)");
         std::process::exit(130);

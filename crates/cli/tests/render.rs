@@ -586,6 +586,38 @@ fn the_render_command_reports_what_it_synthesized() {
     assert!(lit > image.len() / 8, "the OBJ quad covers {lit} values");
 }
 
+/// Issue 13, item 8: run from a shell without `XDG_RUNTIME_DIR`, the Vulkan driver's Wayland
+/// probe printed "error: XDG_RUNTIME_DIR is invalid or not set" twice during a successful
+/// render. The binary now gives itself a private runtime directory, and removes it.
+#[test]
+fn a_render_without_a_runtime_directory_prints_no_false_error() {
+    if renderer().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("plane.png");
+    let model = golden_model_path();
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_btfmrf"))
+        .args(["render", model.to_str().unwrap(), "--out"])
+        .arg(&out)
+        .args(["--size", "32x32", "--mesh", "plane", "--tile", "32"])
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("WAYLAND_DISPLAY")
+        .env("TMPDIR", dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+    assert!(out.exists());
+    // Nothing is left in the temporary folder but the output.
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(left, vec![std::ffi::OsString::from("plane.png")]);
+}
+
 #[test]
 fn bad_render_input_gives_one_clear_error() {
     let dir = tempfile::tempdir().unwrap();
