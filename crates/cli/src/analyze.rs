@@ -96,7 +96,8 @@ pub struct Args {
     #[arg(long, default_value_t = btfmrf::analysis::EXEMPLAR_SIDE)]
     exemplar: usize,
     /// Do not look for a lattice. By default a material that repeats along both image axes (a
-    /// weave, tiles, a brick bond: a clear autocorrelation peak at the period) keeps each
+    /// weave, tiles, a brick bond photographed square-on: a clear autocorrelation peak at the
+    /// period; a pattern at an angle or in perspective is not found) keeps each
     /// subspace image's mean period, at most 32 x 32 samples (a mean and up to 8 principal
     /// deviations of 6 KB each: 58 KB for a 128^2 knit at 20 subspace images), laid on
     /// the lattice at synthesis, and the MRF models only the variation around it; the range
