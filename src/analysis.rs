@@ -452,13 +452,13 @@ fn divide_by_period(image: &mut Array3<f32>, part: &PeriodicPart, k: usize) {
         return;
     };
     let (_, h, w) = image.dim();
-    let planes: Vec<Array2<f32>> = tile
-        .outer_iter()
-        .map(|t| lattice::tiled(&t.to_owned(), &part.lattice, h, w).mapv(|v| v as f32))
-        .collect();
-    let views: Vec<_> = planes.iter().map(|p| p.view()).collect();
-    let tiled = stack(Axis(0), &views).expect("three planes of one shape");
-    let (y_image, y_tile) = (relight::luminance(image), relight::luminance(&tiled));
+    // Luminance is linear, so the period's luminance laid on the lattice is the luminance of
+    // the laid period: one plane to lay, not three.
+    let y_period = relight::luminance(&tile.mapv(|v| v as f32));
+    let (y_image, y_tile) = (
+        relight::luminance(image),
+        lattice::tiled(&y_period, &part.lattice, h, w),
+    );
     let floor = PERIOD_FLOOR * y_tile.mean().unwrap_or(0.0) + f64::from(f32::MIN_POSITIVE);
     let mut ratio = clamp_log_tails(&y_image / &y_tile.mapv(|t| t.max(floor)));
     // Synthesis multiplies an independent ratio field by the tile, whose mean product is the

@@ -99,7 +99,7 @@ pub struct Args {
     /// weave, tiles, a brick bond photographed square-on: a clear autocorrelation peak at the
     /// period; a pattern at an angle or in perspective is not found) keeps each
     /// subspace image's mean period, at most 32 x 32 samples (a mean and up to 8 principal
-    /// deviations of 6 KB each: 58 KB for a 128^2 knit at 20 subspace images), laid on
+    /// deviations of 6 KiB each: 56.7 KiB for a 128^2 knit at 20 subspace images), laid on
     /// the lattice at synthesis, and the MRF models only the variation around it; the range
     /// map is then laid on the same lattice instead of quilted. Stochastic textures are not
     /// affected.
