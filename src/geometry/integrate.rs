@@ -71,6 +71,36 @@ pub fn frankot_chellappa(normals: &Array3<f64>) -> Array2<f64> {
     heights.mapv(|v| v - min)
 }
 
+/// The zero-mean periodic field whose forward differences best match `right` (sample to its
+/// right neighbour) and `down` (sample to the one below) in least squares, both wrapping
+/// around the torus: the discrete Poisson equation, diagonal in the DFT. A consistent pair of
+/// differences gives its field back exactly; an inconsistent one (joins of patches that do not
+/// quite fit) has its mismatch spread smoothly instead of left as steps.
+///
+/// # Panics
+/// Shapes that differ.
+pub fn integrate_on_torus(right: &Array2<f64>, down: &Array2<f64>) -> Array2<f64> {
+    assert_eq!(right.dim(), down.dim(), "difference planes of one shape");
+    let (h, w) = right.dim();
+    if h == 0 || w == 0 {
+        return Array2::zeros((h, w));
+    }
+    let (fx, fy) = (fft::forward(right), fft::forward(down));
+    let tau = 2.0 * std::f64::consts::PI;
+    // The DFT of a forward difference along an axis of n samples at bin k: e^(i tau k / n) - 1.
+    let shift = |k: usize, n: usize| Complex64::from_polar(1.0, tau * k as f64 / n as f64) - 1.0;
+    let spectrum = Array2::from_shape_fn((h, w), |(kr, kc)| {
+        let (dy, dx) = (shift(kr, h), shift(kc, w));
+        let denom = dx.norm_sqr() + dy.norm_sqr();
+        if denom < 1e-12 {
+            Complex64::new(0.0, 0.0)
+        } else {
+            (dx.conj() * fx[[kr, kc]] + dy.conj() * fy[[kr, kc]]) / denom
+        }
+    });
+    fft::inverse_real(&spectrum)
+}
+
 /// Unit normals of a height field by central differences (x right, y up; edge samples repeated
 /// at the borders), shape (3, rows, cols).
 pub fn normals_of(heights: &Array2<f64>) -> Array3<f64> {
@@ -171,6 +201,31 @@ mod tests {
         // The sign is right: the peak stays a peak.
         let peak = est[[20, 22]];
         assert!(peak > est[[2, 2]] + 3.0, "{peak}");
+    }
+
+    #[test]
+    fn torus_integration_inverts_forward_differences() {
+        let (h, w) = (12, 17);
+        let field = Array2::from_shape_fn((h, w), |(y, x)| {
+            ((y * 7 + x * 3) % 11) as f64 + (0.3 * x as f64).sin()
+        });
+        let right = Array2::from_shape_fn((h, w), |(y, x)| field[[y, (x + 1) % w]] - field[[y, x]]);
+        let down = Array2::from_shape_fn((h, w), |(y, x)| field[[(y + 1) % h, x]] - field[[y, x]]);
+        let back = integrate_on_torus(&right, &down);
+        let mean = field.mean().unwrap();
+        for (a, b) in back.iter().zip(&field) {
+            assert!((a - (b - mean)).abs() < 1e-9, "{a} vs {}", b - mean);
+        }
+        // One inconsistent difference (a step that does not close around the torus) is
+        // spread: no single step of the result carries it.
+        let mut bad = right.clone();
+        bad[[5, 8]] += 6.0;
+        let spread = integrate_on_torus(&bad, &down);
+        let worst = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (y, x)))
+            .map(|(y, x)| (spread[[y, (x + 1) % w]] - spread[[y, x]] - right[[y, x]]).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 3.0, "{worst}");
     }
 
     #[test]

@@ -7,7 +7,7 @@ pub mod photometric_stereo;
 pub mod quilt;
 pub mod relight;
 
-pub use integrate::{frankot_chellappa, normals_of};
+pub use integrate::{frankot_chellappa, integrate_on_torus, normals_of};
 pub use photometric_stereo::{NormalMap, estimate_normals, frontal_view};
 pub use quilt::{detail_scale, quilt, resample_periodic, split_detail};
 
