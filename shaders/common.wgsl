@@ -39,6 +39,9 @@ struct VertexInput {
     @location(1) normal: vec3<f32>,
     @location(2) tangent: vec4<f32>,
     @location(3) uv: vec2<f32>,
+    // The frames beyond the nearest face edges: (angle_u, weight_u, angle_v, weight_v), see
+    // Vertex::seam in crates/render/src/mesh.rs.
+    @location(4) seam: vec4<f32>,
 }
 
 struct VertexOutput {
@@ -47,6 +50,7 @@ struct VertexOutput {
     @location(1) normal: vec3<f32>,
     @location(2) tangent: vec4<f32>,
     @location(3) uv: vec2<f32>,
+    @location(4) seam: vec4<f32>,
 }
 
 // Azimuthal-equidistant projection of a unit tangent-frame vector, theta clamped to max_theta
@@ -177,7 +181,31 @@ fn transform(in: VertexInput, position: vec3<f32>) -> VertexOutput {
     out.normal = in.normal;
     out.tangent = in.tangent;
     out.uv = in.uv;
+    out.seam = in.seam;
     return out;
+}
+
+// Rotations below this (radians) are the same frame (mesh.rs TURNED).
+const TURNED: f32 = 1e-3;
+
+// The fragment with its tangent frame turned by `angle` radians about the normal (the frame of
+// the face beyond an edge; Vertex::frames on the CPU).
+fn turned(in: VertexOutput, angle: f32) -> VertexOutput {
+    let frame = tangent_frame(in.normal, in.tangent);
+    var out = in;
+    out.tangent = vec4<f32>(cos(angle) * frame[0] + sin(angle) * frame[1], in.tangent.w);
+    return out;
+}
+
+// Normalised weights of the fragment's own frame and the frames beyond the nearest edge along
+// u and along v; a frame beyond an edge that is not turned counts as the fragment's own.
+fn seam_weights(in: VertexOutput) -> vec3<f32> {
+    let wu = max(in.seam.y, 0.0);
+    let wv = max(in.seam.w, 0.0);
+    let same_u = abs(in.seam.x) < TURNED;
+    let same_v = abs(in.seam.z) < TURNED;
+    let own = 1.0 + select(0.0, wu, same_u) + select(0.0, wv, same_v);
+    return vec3<f32>(own, select(wu, 0.0, same_u), select(wv, 0.0, same_v)) / (1.0 + wu + wv);
 }
 
 // View and light of a fragment in its tangent frame (unit vectors), and the point light's

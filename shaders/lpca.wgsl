@@ -49,8 +49,9 @@ fn vs_main(in: VertexInput) -> VertexOutput {
     return transform(in, in.position);
 }
 
-@fragment
-fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
+// The LPCA BTF at a fragment: the measured tile's nearest texel, its 3 x 3 nearest measured
+// (view, light) pairs blended.
+fn shade_lpca(in: VertexOutput) -> vec4<f32> {
     let dirs = tangent_directions(in);
     let v = dirs.v;
     let l = dirs.l;
@@ -75,4 +76,18 @@ fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
         }
     }
     return vec4<f32>(sum * falloff, 1.0);
+}
+
+// shade_lpca blended across turned face edges (seam_weights).
+@fragment
+fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
+    let w = seam_weights(in);
+    var colour = w.x * shade_lpca(in);
+    if (w.y > 0.0) {
+        colour += w.y * shade_lpca(turned(in, in.seam.x));
+    }
+    if (w.z > 0.0) {
+        colour += w.z * shade_lpca(turned(in, in.seam.z));
+    }
+    return colour;
 }

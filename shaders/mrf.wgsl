@@ -84,3 +84,16 @@ fn shade_mrf(in: VertexOutput) -> vec4<f32> {
     }
     return vec4<f32>(colour * falloff, 1.0);
 }
+
+// shade_mrf blended across turned face edges (seam_weights): the frame turns gradually.
+fn shade_mrf_blended(in: VertexOutput) -> vec4<f32> {
+    let w = seam_weights(in);
+    var colour = w.x * shade_mrf(in);
+    if (w.y > 0.0) {
+        colour += w.y * shade_mrf(turned(in, in.seam.x));
+    }
+    if (w.z > 0.0) {
+        colour += w.z * shade_mrf(turned(in, in.seam.z));
+    }
+    return colour;
+}

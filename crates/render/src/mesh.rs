@@ -6,6 +6,7 @@
 //! up, the direction of *decreasing* v), z = normal. The bitangent is
 //! `tangent.w * cross(normal, tangent)`, so mirrored texture mappings work too.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use super::{RenderError, Result};
@@ -22,7 +23,22 @@ pub struct Vertex {
     pub tangent: [f32; 4],
     /// Texture coordinates, in repetitions of the (tileable) texture.
     pub uv: [f32; 2],
+    /// Blending across the nearest face edge along u and along v: `[angle_u, weight_u,
+    /// angle_v, weight_v]`, the frame beyond the edge as a rotation of this one about the
+    /// normal (radians) and its raw weight (1 at the edge, 0 from [`SEAM_BAND`] of a face
+    /// away; this frame's weight is 1). All zero on meshes whose frames run on continuously.
+    pub seam: [f32; 4],
 }
+
+/// How far into a face (a fraction of its side) the frame beyond an edge is blended in.
+/// Where a tile meets itself turned (6 edges of the inflated-cube sphere) the light's azimuth
+/// in the tangent frame jumps by the turn, and a measured material whose images depend on the
+/// azimuth (every real RTI capture, whose lamp brightness varies around the dome) showed the
+/// edge as a sharp brightness wedge; blended, the frame turns gradually over a band.
+pub const SEAM_BAND: f32 = 0.25;
+
+/// Rotations below this (radians) are the same frame.
+const TURNED: f32 = 1e-3;
 
 impl Vertex {
     /// The bitangent (image up): `w * cross(normal, tangent)`.
@@ -34,9 +50,28 @@ impl Vertex {
         c.map(|x| x * self.tangent[3])
     }
 
+    /// The tangents (with the bitangent sign) of the frames a fragment here blends: its own,
+    /// then each frame beyond a nearby edge that is turned against it (the shader's
+    /// `turned`).
+    pub fn frames(&self) -> impl Iterator<Item = [f32; 4]> + '_ {
+        let own = self.tangent;
+        let b = self.bitangent();
+        let partners = [(self.seam[0], self.seam[1]), (self.seam[2], self.seam[3])];
+        std::iter::once(own).chain(
+            partners
+                .into_iter()
+                .filter(|&(angle, weight)| weight > 0.0 && angle.abs() > TURNED)
+                .map(move |(angle, _)| {
+                    let (sin, cos) = angle.sin_cos();
+                    let t = [0, 1, 2].map(|k| cos * own[k] + sin * b[k]);
+                    [t[0], t[1], t[2], own[3]]
+                }),
+        )
+    }
+
     /// The vertex buffer layout matching the shaders' `VertexInput`.
     pub fn layout() -> wgpu::VertexBufferLayout<'static> {
-        const ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x4, 3 => Float32x2];
+        const ATTRIBUTES: [wgpu::VertexAttribute; 5] = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x4, 3 => Float32x2, 4 => Float32x4];
         wgpu::VertexBufferLayout {
             array_stride: std::mem::size_of::<Vertex>() as u64,
             step_mode: wgpu::VertexStepMode::Vertex,
@@ -168,6 +203,7 @@ impl Mesh {
                     normal,
                     tangent: [0.0; 4],
                     uv: [s * su, t * sv],
+                    seam: [0.0; 4],
                 });
             }
         }
@@ -205,7 +241,9 @@ impl Mesh {
     /// plane, so the tileable texture runs on seamlessly across the 4 faces around the
     /// equator and from the front one (+z) onto the top and bottom; across the other 6 edges
     /// the tile meets itself turned by a quarter or half turn (a faint seam in the texture,
-    /// and with displacement mapping a crack, since the heights on both sides differ).
+    /// and with displacement mapping a crack, since the heights on both sides differ); the
+    /// tangent frames are blended across every edge ([`Vertex::seam`]), so the shading turns
+    /// gradually there instead of stepping.
     pub fn sphere(cells: u32, repeats: f32) -> Self {
         use std::f32::consts::FRAC_PI_4;
         // A face edge is a quarter of the equator, pi / 2 long.
@@ -240,7 +278,62 @@ impl Mesh {
             mesh.vertices.extend(face.vertices);
             mesh.indices.extend(face.indices.iter().map(|i| base + i));
         }
+        mesh.blend_face_edges(cells);
         mesh
+    }
+
+    /// Fills [`Vertex::seam`] for a mesh of square faces, each a `cells` x `cells` grid
+    /// (as [`Mesh::grid`] lays them out, one after another): per vertex, towards the nearest
+    /// edge along u and along v, the rotation of the frame on the face beyond (measured at the
+    /// coincident vertex on that edge, in the same row or column), weighted by the distance.
+    /// Across an edge both sides then blend the same two frames; at the 8 corners, where three
+    /// faces meet, nearly the same.
+    fn blend_face_edges(&mut self, cells: u32) {
+        let side = cells as usize + 1;
+        let per_face = side * side;
+        let last = cells as usize;
+        // Vertices by position (to 1e-5 units): the coincident vertex across an edge.
+        let key = |p: [f32; 3]| p.map(|x| (x * 1e5).round() as i64);
+        let mut by_position: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+        for (i, v) in self.vertices.iter().enumerate() {
+            by_position.entry(key(v.position)).or_default().push(i);
+        }
+        let vertices = &self.vertices;
+        // The rotation from vertex i's frame to that of the coincident vertex on another face.
+        let angle_beyond = |i: usize| -> f32 {
+            let a = &vertices[i];
+            let across = by_position[&key(a.position)]
+                .iter()
+                .find(|&&j| j / per_face != i / per_face);
+            let Some(&j) = across else {
+                return 0.0;
+            };
+            let t = [a.tangent[0], a.tangent[1], a.tangent[2]];
+            let g = &vertices[j];
+            let tg = [g.tangent[0], g.tangent[1], g.tangent[2]];
+            dot(tg, a.bitangent()).atan2(dot(tg, t))
+        };
+        // Off the corners, where the vertex on the edge has two faces beyond it.
+        let inner = |k: usize| if last >= 2 { k.clamp(1, last - 1) } else { k };
+        // The nearer edge along one axis and the distance to it (a fraction of the side).
+        let nearer = |k: usize| {
+            let s = k as f32 / cells as f32;
+            if s < 0.5 { (0, s) } else { (last, 1.0 - s) }
+        };
+        let weight = |d: f32| (1.0 - d / SEAM_BAND).max(0.0);
+        let seams: Vec<[f32; 4]> = (0..vertices.len())
+            .map(|i| {
+                let (face, r, c) = (i / per_face, (i % per_face) / side, i % side);
+                let (edge_c, du) = nearer(c);
+                let (edge_r, dv) = nearer(r);
+                let au = angle_beyond(face * per_face + inner(r) * side + edge_c);
+                let av = angle_beyond(face * per_face + edge_r * side + inner(c));
+                [au, weight(du), av, weight(dv)]
+            })
+            .collect();
+        for (v, seam) in self.vertices.iter_mut().zip(seams) {
+            v.seam = seam;
+        }
     }
 
     /// A 2 x 2 square in the xz plane facing +y, `cells` x `cells` quads; u along +x, v along
@@ -346,6 +439,7 @@ impl Mesh {
                     tangent: [0.0; 4],
                     // OBJ's v grows upwards; ours grows down the image.
                     uv: [m.texcoords[2 * i], 1.0 - m.texcoords[2 * i + 1]],
+                    seam: [0.0; 4],
                 });
             }
             for &i in &m.indices {
@@ -600,6 +694,70 @@ mod tests {
         for v in &mesh.vertices {
             assert!((dot(v.position, v.position) - 1.0).abs() < 1e-5);
         }
+    }
+
+    /// The frames a vertex blends, as (world tangent, normalised weight), frames whose
+    /// tangents' dot product exceeds `same` merged (the shader's `seam_weights`).
+    fn blended_frames(v: &Vertex, same: f32) -> Vec<([f32; 3], f32)> {
+        let total = 1.0 + v.seam[1] + v.seam[3];
+        let mut out: Vec<([f32; 3], f32)> = Vec::new();
+        let weights = [1.0, v.seam[1], v.seam[3]];
+        let angles = [0.0, v.seam[0], v.seam[2]];
+        for (angle, weight) in angles.into_iter().zip(weights) {
+            let (sin, cos) = angle.sin_cos();
+            let b = v.bitangent();
+            let t = [0, 1, 2].map(|k| cos * v.tangent[k] + sin * b[k]);
+            match out.iter_mut().find(|(u, _)| dot(*u, t) > same) {
+                Some((_, w)) => *w += weight / total,
+                None => out.push((t, weight / total)),
+            }
+        }
+        out.retain(|&(_, w)| w > 1e-6);
+        out
+    }
+
+    #[test]
+    fn the_sphere_blends_the_same_frames_on_both_sides_of_every_edge() {
+        let mesh = Mesh::sphere(8, 1.0);
+        let (mut pairs, mut turned) = (0, 0);
+        for (i, a) in mesh.vertices.iter().enumerate() {
+            for b in &mesh.vertices[i + 1..] {
+                let d = sub(a.position, b.position);
+                if dot(d, d) > 1e-10 {
+                    continue;
+                }
+                // At the 8 corners three faces meet with frames that are not quarter turns
+                // of each other; the blend there is close, not exact.
+                if a.position.iter().all(|x| (x.abs() - 0.57735).abs() < 1e-3) {
+                    continue;
+                }
+                pairs += 1;
+                let t = |v: &Vertex| [v.tangent[0], v.tangent[1], v.tangent[2]];
+                turned += usize::from(dot(t(a), t(b)) < 0.99);
+                // Exact where only the edge's two faces take part; within a band of a
+                // corner the third face's frame comes in, measured a step away on its edge
+                // (within 25 degrees).
+                let near_corner = a.seam[1] > 0.0 && a.seam[3] > 0.0;
+                let same = if near_corner { 0.9 } else { 0.9999 };
+                let (fa, fb) = (blended_frames(a, same), blended_frames(b, same));
+                assert_eq!(fa.len(), fb.len(), "{fa:?} vs {fb:?}");
+                for (ta, wa) in &fa {
+                    let wb = fb.iter().find(|(tb, _)| dot(*ta, *tb) > same).map(|f| f.1);
+                    assert!(
+                        wb.is_some_and(|wb| (wb - wa).abs() < 1e-5),
+                        "{:?}: {fa:?} vs {fb:?}",
+                        a.position
+                    );
+                }
+            }
+        }
+        // 12 edges of 7 vertices between the corners.
+        assert_eq!(pairs, 12 * 7, "coincident pairs");
+        assert!(turned > 0, "no turned edge to test");
+        // Away from the edges a fragment keeps its own frame alone.
+        let centre = &mesh.vertices[4 * 9 + 4];
+        assert_eq!(blended_frames(centre, 0.9999).len(), 1);
+        assert_eq!(centre.frames().count(), 1);
     }
 
     #[test]

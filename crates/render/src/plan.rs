@@ -101,9 +101,12 @@ pub fn plan_scene(
         if !cs.iter().any(|&c| inside(c)) {
             continue;
         }
+        // Every frame a fragment may blend (its own and those beyond a nearby edge).
         for v in &vs {
             if inside(clip(v.position)) {
-                sample(v.position, v.normal, v.tangent);
+                for tangent in v.frames() {
+                    sample(v.position, v.normal, tangent);
+                }
             }
         }
         let centre: [f32; 3] = std::array::from_fn(|k| {
@@ -113,16 +116,17 @@ pub fn plan_scene(
             std::array::from_fn(|k| vs[0].normal[k] + vs[1].normal[k] + vs[2].normal[k]);
         let nlen = dot(normal, normal).sqrt().max(1e-12);
         let normal = normal.map(|x| x / nlen);
-        let tangent = vs[0].tangent;
-        let t = [tangent[0], tangent[1], tangent[2]];
-        let t = sub(t, normal.map(|x| x * dot(normal, t)));
-        let tlen = dot(t, t).sqrt();
-        if tlen > 1e-6 {
-            sample(
-                centre,
-                normal,
-                [t[0] / tlen, t[1] / tlen, t[2] / tlen, tangent[3]],
-            );
+        for tangent in vs[0].frames() {
+            let t = [tangent[0], tangent[1], tangent[2]];
+            let t = sub(t, normal.map(|x| x * dot(normal, t)));
+            let tlen = dot(t, t).sqrt();
+            if tlen > 1e-6 {
+                sample(
+                    centre,
+                    normal,
+                    [t[0] / tlen, t[1] / tlen, t[2] / tlen, tangent[3]],
+                );
+            }
         }
         // Screen footprint: pixels per texture repetition (all vertices in front).
         if cs.iter().all(|c| c[3] > 1e-6) {
