@@ -42,6 +42,8 @@ struct VertexInput {
     // The frames beyond the nearest face edges: (angle_u, weight_u, angle_v, weight_v), see
     // Vertex::seam in crates/render/src/mesh.rs.
     @location(4) seam: vec4<f32>,
+    // This point's texture coordinates on those faces (u edge: xy, v edge: zw).
+    @location(5) seam_uv: vec4<f32>,
 }
 
 struct VertexOutput {
@@ -51,6 +53,7 @@ struct VertexOutput {
     @location(2) tangent: vec4<f32>,
     @location(3) uv: vec2<f32>,
     @location(4) seam: vec4<f32>,
+    @location(5) seam_uv: vec4<f32>,
 }
 
 // Azimuthal-equidistant projection of a unit tangent-frame vector, theta clamped to max_theta
@@ -182,28 +185,31 @@ fn transform(in: VertexInput, position: vec3<f32>) -> VertexOutput {
     out.tangent = in.tangent;
     out.uv = in.uv;
     out.seam = in.seam;
+    out.seam_uv = in.seam_uv;
     return out;
 }
 
 // Rotations below this (radians) are the same frame (mesh.rs TURNED).
 const TURNED: f32 = 1e-3;
 
-// The fragment with its tangent frame turned by `angle` radians about the normal (the frame of
-// the face beyond an edge; Vertex::frames on the CPU).
-fn turned(in: VertexOutput, angle: f32) -> VertexOutput {
+// The fragment as the face beyond an edge maps it: its tangent frame turned by `angle`
+// radians about the normal (Vertex::frames on the CPU) and that face's texture coordinates.
+fn turned(in: VertexOutput, angle: f32, uv: vec2<f32>) -> VertexOutput {
     let frame = tangent_frame(in.normal, in.tangent);
     var out = in;
     out.tangent = vec4<f32>(cos(angle) * frame[0] + sin(angle) * frame[1], in.tangent.w);
+    out.uv = uv;
     return out;
 }
 
-// Normalised weights of the fragment's own frame and the frames beyond the nearest edge along
-// u and along v; a frame beyond an edge that is not turned counts as the fragment's own.
-fn seam_weights(in: VertexOutput) -> vec3<f32> {
-    let wu = max(in.seam.y, 0.0);
-    let wv = max(in.seam.w, 0.0);
-    let same_u = abs(in.seam.x) < TURNED;
-    let same_v = abs(in.seam.z) < TURNED;
+// Normalised weights of the fragment's own mapping and the mappings of the faces beyond the
+// nearest edge along u and along v (`seam` as VertexInput.seam); a face beyond an edge whose
+// frame is not turned continues this one's texture and counts as the fragment's own.
+fn seam_weights(seam: vec4<f32>) -> vec3<f32> {
+    let wu = max(seam.y, 0.0);
+    let wv = max(seam.w, 0.0);
+    let same_u = abs(seam.x) < TURNED;
+    let same_v = abs(seam.z) < TURNED;
     let own = 1.0 + select(0.0, wu, same_u) + select(0.0, wv, same_v);
     return vec3<f32>(own, select(wu, 0.0, same_u), select(wv, 0.0, same_v)) / (1.0 + wu + wv);
 }

@@ -3,7 +3,11 @@
 
 @vertex
 fn vs_main(in: VertexInput) -> VertexOutput {
-    let height = textureSampleLevel(relief, tex_sampler, in.uv, 0.0).w;
+    // Blended across turned face edges like the shading, so both sides of an edge move alike.
+    let w = seam_weights(in.seam);
+    let height = w.x * textureSampleLevel(relief, tex_sampler, in.uv, 0.0).w
+        + w.y * textureSampleLevel(relief, tex_sampler, in.seam_uv.xy, 0.0).w
+        + w.z * textureSampleLevel(relief, tex_sampler, in.seam_uv.zw, 0.0).w;
     let moved = in.position + normalize(in.normal) * height * globals.params.z;
     return transform(in, moved);
 }

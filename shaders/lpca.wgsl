@@ -81,13 +81,13 @@ fn shade_lpca(in: VertexOutput) -> vec4<f32> {
 // shade_lpca blended across turned face edges (seam_weights).
 @fragment
 fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
-    let w = seam_weights(in);
+    let w = seam_weights(in.seam);
     var colour = w.x * shade_lpca(in);
     if (w.y > 0.0) {
-        colour += w.y * shade_lpca(turned(in, in.seam.x));
+        colour += w.y * shade_lpca(turned(in, in.seam.x, in.seam_uv.xy));
     }
     if (w.z > 0.0) {
-        colour += w.z * shade_lpca(turned(in, in.seam.z));
+        colour += w.z * shade_lpca(turned(in, in.seam.z, in.seam_uv.zw));
     }
     return colour;
 }

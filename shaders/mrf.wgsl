@@ -41,13 +41,12 @@ fn mean_shading(q: vec2<f32>) -> f32 {
 // that the subspace images' own average shading is not applied twice, k the measured
 // strength (bump_relight, bump_strength). Clusters that were not synthesized
 // (outside the planned set) are skipped and the weights renormalised.
-fn shade_mrf(in: VertexOutput) -> vec4<f32> {
+// `ddx`, `ddy`: the screen derivatives of in.uv (taken by the caller, in uniform control flow).
+fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
     let dirs = tangent_directions(in);
     let v = dirs.v;
     let l = dirs.l;
     let falloff = dirs.falloff;
-    let ddx = dpdx(in.uv);
-    let ddy = dpdy(in.uv);
     let relief_here = textureSampleGrad(relief, tex_sampler, in.uv, ddx, ddy);
     if (l.z <= globals.limits.z) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
@@ -85,15 +84,20 @@ fn shade_mrf(in: VertexOutput) -> vec4<f32> {
     return vec4<f32>(colour * falloff, 1.0);
 }
 
-// shade_mrf blended across turned face edges (seam_weights): the frame turns gradually.
+// shade_mrf blended across turned face edges (seam_weights): the frame turns and the texture
+// cross-fades gradually.
 fn shade_mrf_blended(in: VertexOutput) -> vec4<f32> {
-    let w = seam_weights(in);
-    var colour = w.x * shade_mrf(in);
+    let w = seam_weights(in.seam);
+    let ddx = dpdx(vec4<f32>(in.uv, in.seam_uv.xy));
+    let ddy = dpdy(vec4<f32>(in.uv, in.seam_uv.xy));
+    let ddx_v = dpdx(in.seam_uv.zw);
+    let ddy_v = dpdy(in.seam_uv.zw);
+    var colour = w.x * shade_mrf(in, ddx.xy, ddy.xy);
     if (w.y > 0.0) {
-        colour += w.y * shade_mrf(turned(in, in.seam.x));
+        colour += w.y * shade_mrf(turned(in, in.seam.x, in.seam_uv.xy), ddx.zw, ddy.zw);
     }
     if (w.z > 0.0) {
-        colour += w.z * shade_mrf(turned(in, in.seam.z));
+        colour += w.z * shade_mrf(turned(in, in.seam.z, in.seam_uv.zw), ddx_v, ddy_v);
     }
     return colour;
 }

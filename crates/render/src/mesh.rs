@@ -28,6 +28,10 @@ pub struct Vertex {
     /// normal (radians) and its raw weight (1 at the edge, 0 from [`SEAM_BAND`] of a face
     /// away; this frame's weight is 1). All zero on meshes whose frames run on continuously.
     pub seam: [f32; 4],
+    /// This point's texture coordinates on the face beyond the edge along u, then along v
+    /// (that face's mapping continued past its edge), so the texture is cross-faded there too;
+    /// `uv` twice where there is no such face.
+    pub seam_uv: [f32; 4],
 }
 
 /// How far into a face (a fraction of its side) the frame beyond an edge is blended in.
@@ -71,7 +75,7 @@ impl Vertex {
 
     /// The vertex buffer layout matching the shaders' `VertexInput`.
     pub fn layout() -> wgpu::VertexBufferLayout<'static> {
-        const ATTRIBUTES: [wgpu::VertexAttribute; 5] = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x4, 3 => Float32x2, 4 => Float32x4];
+        const ATTRIBUTES: [wgpu::VertexAttribute; 6] = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x4, 3 => Float32x2, 4 => Float32x4, 5 => Float32x4];
         wgpu::VertexBufferLayout {
             array_stride: std::mem::size_of::<Vertex>() as u64,
             step_mode: wgpu::VertexStepMode::Vertex,
@@ -204,6 +208,7 @@ impl Mesh {
                     tangent: [0.0; 4],
                     uv: [s * su, t * sv],
                     seam: [0.0; 4],
+                    seam_uv: [s * su, t * sv, s * su, t * sv],
                 });
             }
         }
@@ -240,10 +245,10 @@ impl Mesh {
     /// whole number of texture repetitions, about `repeats` per 2 units of length like the
     /// plane, so the tileable texture runs on seamlessly across the 4 faces around the
     /// equator and from the front one (+z) onto the top and bottom; across the other 6 edges
-    /// the tile meets itself turned by a quarter or half turn (a faint seam in the texture,
-    /// and with displacement mapping a crack, since the heights on both sides differ); the
-    /// tangent frames are blended across every edge ([`Vertex::seam`]), so the shading turns
-    /// gradually there instead of stepping.
+    /// the tile meets itself turned by a quarter or half turn. Across every edge the frames,
+    /// the texture and the heights are cross-faded over a quarter of a face
+    /// ([`Vertex::seam`], [`Vertex::seam_uv`]), so nothing steps there: not the shading, the
+    /// texture, nor (under displacement) the surface.
     pub fn sphere(cells: u32, repeats: f32) -> Self {
         use std::f32::consts::FRAC_PI_4;
         // A face edge is a quarter of the equator, pi / 2 long.
@@ -278,7 +283,20 @@ impl Mesh {
             mesh.vertices.extend(face.vertices);
             mesh.indices.extend(face.indices.iter().map(|i| base + i));
         }
-        mesh.blend_face_edges(cells);
+        // Face f's texture coordinates of a point p on the sphere (the inverse of the grid's
+        // equal-angle mapping, continued past the face's edges), where p lies in front of it.
+        let uv_on = |f: usize, p: [f32; 3]| -> Option<[f32; 2]> {
+            let (n, u, v) = faces[f];
+            let depth = dot(p, n);
+            let coordinate = |axis: [f32; 3]| (dot(p, axis) / depth).atan() / FRAC_PI_4;
+            (depth > 1e-3).then(|| {
+                [
+                    0.5 * (coordinate(u) + 1.0) * k,
+                    0.5 * (coordinate(v) + 1.0) * k,
+                ]
+            })
+        };
+        mesh.blend_face_edges(cells, uv_on);
         mesh
     }
 
@@ -288,7 +306,11 @@ impl Mesh {
     /// coincident vertex on that edge, in the same row or column), weighted by the distance.
     /// Across an edge both sides then blend the same two frames; at the 8 corners, where three
     /// faces meet, nearly the same.
-    fn blend_face_edges(&mut self, cells: u32) {
+    fn blend_face_edges(
+        &mut self,
+        cells: u32,
+        uv_on: impl Fn(usize, [f32; 3]) -> Option<[f32; 2]>,
+    ) {
         let side = cells as usize + 1;
         let per_face = side * side;
         let last = cells as usize;
@@ -299,19 +321,17 @@ impl Mesh {
             by_position.entry(key(v.position)).or_default().push(i);
         }
         let vertices = &self.vertices;
-        // The rotation from vertex i's frame to that of the coincident vertex on another face.
-        let angle_beyond = |i: usize| -> f32 {
+        // The face beyond edge vertex i, and the rotation from i's frame to the frame of its
+        // coincident vertex there.
+        let beyond = |i: usize| -> Option<(usize, f32)> {
             let a = &vertices[i];
-            let across = by_position[&key(a.position)]
+            let &j = by_position[&key(a.position)]
                 .iter()
-                .find(|&&j| j / per_face != i / per_face);
-            let Some(&j) = across else {
-                return 0.0;
-            };
+                .find(|&&j| j / per_face != i / per_face)?;
             let t = [a.tangent[0], a.tangent[1], a.tangent[2]];
             let g = &vertices[j];
             let tg = [g.tangent[0], g.tangent[1], g.tangent[2]];
-            dot(tg, a.bitangent()).atan2(dot(tg, t))
+            Some((j / per_face, dot(tg, a.bitangent()).atan2(dot(tg, t))))
         };
         // Off the corners, where the vertex on the edge has two faces beyond it.
         let inner = |k: usize| if last >= 2 { k.clamp(1, last - 1) } else { k };
@@ -321,18 +341,30 @@ impl Mesh {
             if s < 0.5 { (0, s) } else { (last, 1.0 - s) }
         };
         let weight = |d: f32| (1.0 - d / SEAM_BAND).max(0.0);
-        let seams: Vec<[f32; 4]> = (0..vertices.len())
+        let seams: Vec<([f32; 4], [f32; 4])> = (0..vertices.len())
             .map(|i| {
                 let (face, r, c) = (i / per_face, (i % per_face) / side, i % side);
+                let v = &vertices[i];
+                // Angle, weight and texture coordinates beyond the nearer edge of one axis.
+                let partner = |edge_vertex: usize, d: f32| -> (f32, f32, [f32; 2]) {
+                    let Some((g, angle)) = beyond(edge_vertex) else {
+                        return (0.0, 0.0, v.uv);
+                    };
+                    match uv_on(g, v.position) {
+                        Some(uv) => (angle, weight(d), uv),
+                        None => (angle, 0.0, v.uv),
+                    }
+                };
                 let (edge_c, du) = nearer(c);
                 let (edge_r, dv) = nearer(r);
-                let au = angle_beyond(face * per_face + inner(r) * side + edge_c);
-                let av = angle_beyond(face * per_face + edge_r * side + inner(c));
-                [au, weight(du), av, weight(dv)]
+                let (au, wu, uv_u) = partner(face * per_face + inner(r) * side + edge_c, du);
+                let (av, wv, uv_v) = partner(face * per_face + edge_r * side + inner(c), dv);
+                ([au, wu, av, wv], [uv_u[0], uv_u[1], uv_v[0], uv_v[1]])
             })
             .collect();
-        for (v, seam) in self.vertices.iter_mut().zip(seams) {
+        for (v, (seam, seam_uv)) in self.vertices.iter_mut().zip(seams) {
             v.seam = seam;
+            v.seam_uv = seam_uv;
         }
     }
 
@@ -429,6 +461,8 @@ impl Mesh {
                 } else {
                     [0.0; 3]
                 };
+                // OBJ's v grows upwards; ours grows down the image.
+                let uv = [m.texcoords[2 * i], 1.0 - m.texcoords[2 * i + 1]];
                 mesh.vertices.push(Vertex {
                     position: [
                         m.positions[3 * i],
@@ -437,9 +471,9 @@ impl Mesh {
                     ],
                     normal,
                     tangent: [0.0; 4],
-                    // OBJ's v grows upwards; ours grows down the image.
-                    uv: [m.texcoords[2 * i], 1.0 - m.texcoords[2 * i + 1]],
+                    uv,
                     seam: [0.0; 4],
+                    seam_uv: [uv[0], uv[1], uv[0], uv[1]],
                 });
             }
             for &i in &m.indices {
@@ -734,6 +768,16 @@ mod tests {
                 pairs += 1;
                 let t = |v: &Vertex| [v.tangent[0], v.tangent[1], v.tangent[2]];
                 turned += usize::from(dot(t(a), t(b)) < 0.99);
+                // On the edge, the texture coordinates beyond it are the other face's own.
+                for (p, q) in [(a, b), (b, a)] {
+                    let beyond = if p.seam[1] >= 1.0 {
+                        [p.seam_uv[0], p.seam_uv[1]]
+                    } else {
+                        [p.seam_uv[2], p.seam_uv[3]]
+                    };
+                    let d = (beyond[0] - q.uv[0]).abs() + (beyond[1] - q.uv[1]).abs();
+                    assert!(d < 1e-4, "{:?}: {beyond:?} vs {:?}", p.position, q.uv);
+                }
                 // Exact where only the edge's two faces take part; within a band of a
                 // corner the third face's frame comes in, measured a step away on its edge
                 // (within 25 degrees).
