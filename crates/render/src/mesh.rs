@@ -44,6 +44,20 @@ pub const SEAM_BAND: f32 = 0.25;
 /// Rotations below this (radians) are the same frame.
 const TURNED: f32 = 1e-3;
 
+/// A rotation (radians) in `(-3 pi / 4, 5 pi / 4]`: a half turn is always `pi`, never `-pi`,
+/// so that the angles along one edge (interpolated between vertices) do not pass through 0
+/// where rounding flips the sign of `atan2`.
+fn canonical_turn(angle: f32) -> f32 {
+    use std::f32::consts::{FRAC_PI_4, TAU};
+    if angle <= -3.0 * FRAC_PI_4 {
+        angle + TAU
+    } else if angle > 5.0 * FRAC_PI_4 {
+        angle - TAU
+    } else {
+        angle
+    }
+}
+
 impl Vertex {
     /// The bitangent (image up): `w * cross(normal, tangent)`.
     pub fn bitangent(&self) -> [f32; 3] {
@@ -331,7 +345,8 @@ impl Mesh {
             let t = [a.tangent[0], a.tangent[1], a.tangent[2]];
             let g = &vertices[j];
             let tg = [g.tangent[0], g.tangent[1], g.tangent[2]];
-            Some((j / per_face, dot(tg, a.bitangent()).atan2(dot(tg, t))))
+            let angle = dot(tg, a.bitangent()).atan2(dot(tg, t));
+            Some((j / per_face, canonical_turn(angle)))
         };
         // Off the corners, where the vertex on the edge has two faces beyond it.
         let inner = |k: usize| if last >= 2 { k.clamp(1, last - 1) } else { k };
@@ -798,6 +813,20 @@ mod tests {
         // 12 edges of 7 vertices between the corners.
         assert_eq!(pairs, 12 * 7, "coincident pairs");
         assert!(turned > 0, "no turned edge to test");
+        // Neighbouring vertices of a face blend nearly the same rotation (no half turn written
+        // once as pi and once as -pi, which the shader would interpolate through 0).
+        let side = 9;
+        for (i, v) in mesh.vertices.iter().enumerate() {
+            if i % side + 1 < side {
+                let w = mesh.vertices[i + 1];
+                for k in [0, 2] {
+                    if v.seam[k + 1] > 0.0 || w.seam[k + 1] > 0.0 {
+                        let step = (v.seam[k] - w.seam[k]).abs();
+                        assert!(step < 1.0, "{:?} vs {:?}", v.seam, w.seam);
+                    }
+                }
+            }
+        }
         // Away from the edges a fragment keeps its own frame alone.
         let centre = &mesh.vertices[4 * 9 + 4];
         assert_eq!(blended_frames(centre, 0.9999).len(), 1);
