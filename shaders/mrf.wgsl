@@ -37,7 +37,8 @@ fn mean_shading(q: vec2<f32>) -> f32 {
 
 // The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
 // light) pairs blend their clusters' subspace images, then the range map's normal relights
-// the blend for the light by the factor 1 + k (s - 1), s = max(0, n . l) / mean shading, so
+// the blend for the light by the factor 1 + k (s - 1) (floored at SHADING_FLOOR, which
+// mrf.rs defines from the CPU's), s = max(0, n . l) / mean shading, so
 // that the subspace images' own average shading is not applied twice, k the measured
 // strength (bump_relight, bump_strength). Clusters that were not synthesized
 // (outside the planned set) are skipped and the weights renormalised.
@@ -78,7 +79,7 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
                 k += il.weight[b] * light_strength[il.index[b]];
             }
             let s = max(dot(relief_here.xyz, l), 0.0) / mean;
-            colour *= 1.0 + k * (s - 1.0);
+            colour *= max(1.0 + k * (s - 1.0), SHADING_FLOOR);
         }
     }
     return vec4<f32>(colour * falloff, 1.0);

@@ -12,8 +12,10 @@ use ndarray::{Array2, Array3, Axis};
 use super::integrate::{Edges, shading};
 
 /// The smallest shading factor divided out of a photograph (deeper shadow is left as it is,
-/// not amplified into noise).
-const FLOOR: f64 = 0.1;
+/// not amplified into noise), and so the smallest one synthesis multiplies back
+/// ([`crate::synthesis::bump_relight`], the renderer's shader): a measured shadow divided by
+/// it must come back at the measured light, not black.
+pub const SHADING_FLOOR: f64 = 0.1;
 /// Below this mean `max(0, n . l)` a light leaves the relief unlit and the ratio undefined.
 const DARK: f64 = 1e-3;
 /// Largest fitted strength (the plain Lambertian ratio).
@@ -87,7 +89,7 @@ pub fn remove_shading(image: &mut Array3<f32>, heights: &Array2<f64>, l: [f64; 3
     }
 }
 
-/// Divides `image` by `factor` (same rows and columns, floored at [`FLOOR`]), drawing the
+/// Divides `image` by `factor` (same rows and columns, floored at [`SHADING_FLOOR`]), drawing the
 /// chromaticity of brightened noise-dark pixels towards the mean as [`remove_shading`] says.
 fn divide_shading(image: &mut Array3<f32>, factor: &Array2<f64>) {
     let lum = luminance(image);
@@ -95,7 +97,7 @@ fn divide_shading(image: &mut Array3<f32>, factor: &Array2<f64>) {
     let (_, h, w) = image.dim();
     for y in 0..h {
         for x in 0..w {
-            let g = 1.0 / factor[[y, x]].max(FLOOR);
+            let g = 1.0 / factor[[y, x]].max(SHADING_FLOOR);
             let own = match mean {
                 Some(_) if g > 1.0 => {
                     let r = (lum[[y, x]] / CHROMA_NOISE).powi(2).min(1.0);
@@ -173,7 +175,7 @@ mod tests {
         let h = relief();
         let l = light(50.0, 200.0);
         let f = shading_factor(&h, Edges::Clamp, l, 0.7).unwrap();
-        assert!(f.iter().all(|&v| v > FLOOR));
+        assert!(f.iter().all(|&v| v > SHADING_FLOOR));
         let albedo = Array3::from_shape_fn((3, 40, 50), |(c, y, x)| {
             0.2 + 0.1 * c as f32 + 0.01 * ((x + y) % 5) as f32
         });

@@ -18,15 +18,17 @@ use btfmrf::synthesis::SynthesisCache;
 
 const MRF_WGSL: &str = include_str!("../../../shaders/mrf.wgsl");
 
-/// The WGSL source of a mapping's pipeline: `common.wgsl`, `mrf.wgsl`, then the mapping's own
-/// file.
+/// The WGSL source of a mapping's pipeline: `common.wgsl`, the CPU's shading floor
+/// (`SHADING_FLOOR`, [`btfmrf::geometry::relight::SHADING_FLOOR`]), `mrf.wgsl`, then the
+/// mapping's own file.
 pub fn shader_source(mapping: Mapping) -> String {
     let own = match mapping {
         Mapping::Bump => include_str!("../../../shaders/bump.wgsl"),
         Mapping::Displacement => include_str!("../../../shaders/displacement.wgsl"),
         Mapping::Plain => include_str!("../../../shaders/plain.wgsl"),
     };
-    format!("{COMMON_WGSL}\n{MRF_WGSL}\n{own}")
+    let floor = btfmrf::geometry::relight::SHADING_FLOOR;
+    format!("{COMMON_WGSL}\nconst SHADING_FLOOR: f32 = {floor:?};\n{MRF_WGSL}\n{own}")
 }
 
 /// The CPU side of a material on the GPU: what [`GpuMaterial::new`] uploads.
