@@ -5,7 +5,9 @@
 //!
 //! Patches are translated copies only: a flipped or rotated relief would shade the wrong way
 //! under a directional light. The output is defined on the torus, so it tiles exactly; every
-//! join (including the wrap-around) is a cut through an overlap where the two patches agree.
+//! join (including the wrap-around) is a cut through an overlap where the two patches agree,
+//! and the heights are integrated from the patches' differences (a Poisson solve on the
+//! torus), so what a cut cannot hide is spread smoothly instead of left as a step.
 
 use ndarray::Array2;
 use rand::{RngExt, SeedableRng};
@@ -67,7 +69,8 @@ impl Layout {
 /// Only the relief finer than a patch is quilted: variation on larger scales (the bow that
 /// photometric stereo leaves over a whole capture, or an object's overall shape) is removed
 /// first (a Gaussian high-pass, sigma half a patch), because patches from different heights
-/// would meet in steps; the output keeps the source's mean.
+/// would meet in steps; the output keeps the source's mean. Cost: the patch search, plus one
+/// DFT pair over the output for the integration (about 0.15 s at 1024^2).
 ///
 /// # Panics
 /// An empty source or a zero output size (callers check both).
