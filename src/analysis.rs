@@ -47,8 +47,10 @@ pub struct AnalysisOptions {
     /// subspace image's colours towards them (see [`crate::decompose::colour_transfer`]).
     /// Default: true.
     pub colour_matching: bool,
-    /// Largest side of the structure exemplar stored when the model has no range map and
-    /// works in CIE Lab (0: none; see [`crate::model::Exemplar`]). Default: [`EXEMPLAR_SIDE`].
+    /// Largest side of the structure exemplar (0: none; see [`crate::model::Exemplar`]),
+    /// stored when the model works in CIE Lab and has no range map, or has one sampled at
+    /// every pixel of a texture no larger than this and the exemplar brings the synthesis
+    /// closer to the measured images (judged at analysis). Default: [`EXEMPLAR_SIDE`].
     pub exemplar_side: usize,
     /// Look for a lattice (a weave, tiles, a brick bond) and, when one is found, store each
     /// subspace image's mean period and fit the MRF to what is left (see
@@ -220,7 +222,13 @@ pub fn analyze(
     // Without a range map the structure comes from an exemplar: the same centred crop of every
     // subspace image, whose L* detail sets each subspace's gain.
     let wanted = options.exemplar_side > 0 && options.colour_space == ColourSpace::Lab;
-    let crop = (range_map.is_none() && wanted).then(|| {
+    // With a range map sampled at every pixel (a texture of at most the exemplar's side), the
+    // exemplar is the whole image, registered with the map, and synthesis lays it with the
+    // relief's own patches (geometry::quilt_pair), so colour and relief structure line up.
+    let registered_whole = range_map
+        .as_ref()
+        .is_some_and(|m| m.step == 1 && h <= options.exemplar_side && w <= options.exemplar_side);
+    let crop = ((range_map.is_none() || registered_whole) && wanted).then(|| {
         let (ch, cw) = (h.min(options.exemplar_side), w.min(options.exemplar_side));
         ((h - ch) / 2, (w - cw) / 2, ch, cw)
     });
@@ -335,8 +343,24 @@ pub fn analyze(
         shares.push(share);
         crops.extend(lightness);
     }
-    let exemplar = exemplar_from(&crops);
+    // A near-regular material's relief is laid on its lattice, not quilted: no exemplar.
+    let exemplar = if periodic.is_some() && range_map.is_some() {
+        None
+    } else {
+        exemplar_from(&crops)
+    };
     report.warnings.extend(stationarity_warning(shares));
+    // Where the exemplar is judged: up to four subspace representatives spread over the
+    // clusters (an exemplar holds one light's detail; it must help under the others too).
+    let judged: Vec<(usize, usize)> = {
+        let r = &clustering.representatives;
+        let mut picks: Vec<usize> = (0..4).map(|k| k * r.len().saturating_sub(1) / 3).collect();
+        picks.dedup();
+        picks
+            .into_iter()
+            .filter_map(|k| r.get(k).copied())
+            .collect()
+    };
     let model = MaterialModel::new(MaterialParts {
         views: btf.views().clone(),
         lights: btf.lights().clone(),
@@ -348,7 +372,56 @@ pub fn analyze(
         exemplar,
         periodic,
     })?;
+    // An exemplar beside a range map is kept only where it brings the synthesis closer to the
+    // measured images (on the leather, whose creases shade differently under every light, it
+    // did not): the judge's structure distance summed over the judged pairs, both ways.
+    let model = if model.exemplar().is_some() && model.range_map().is_some() {
+        let mut parts = model.clone().into_parts();
+        parts.exemplar = None;
+        let plain = MaterialModel::new(parts)?;
+        let (mut with, mut without) = (Some(0.0), Some(0.0));
+        for &(v, l) in &judged {
+            let measured = btf.image(v, l)?;
+            let (Some(view), Some(light)) = (btf.views().get(v), btf.lights().get(l)) else {
+                continue;
+            };
+            let add = |sum: Option<f64>, d: Option<f64>| sum.zip(d).map(|(s, d)| s + d);
+            with = add(with, structure_distance(&model, &measured, view, light)?);
+            without = add(without, structure_distance(&plain, &measured, view, light)?);
+        }
+        match (with, without) {
+            (Some(with), Some(without)) if with < without => model,
+            // Not closer, or too small to judge: no evidence that it helps.
+            _ => plain,
+        }
+    } else {
+        model
+    };
     Ok((model, report))
+}
+
+/// The judge's structure distance between `model`'s synthesis at (`view`, `light`), at the
+/// measured size and seed 1, and the `measured` image there; `None` for an image too small
+/// for the judge.
+fn structure_distance(
+    model: &MaterialModel,
+    measured: &Array3<f32>,
+    view: &crate::btf::Direction,
+    light: &crate::btf::Direction,
+) -> Result<Option<f64>> {
+    let (_, rows, cols) = measured.dim();
+    let o = crate::synthesis::SynthesisOptions {
+        rows,
+        cols,
+        seed: 1,
+        tileable: false,
+    };
+    let synthesized = model.synthesize_image(view, light, &o)?;
+    let scales = crate::eval::judge::scales_for(rows.min(cols));
+    let signature = |image| crate::eval::judge::Signature::of(image, scales).ok();
+    Ok(signature(measured)
+        .zip(signature(&synthesized))
+        .map(|(reference, candidate)| candidate.compare(&reference).structure))
 }
 
 /// Samples a stored tile keeps along an axis whose period is `period` pixels: one a pixel, at

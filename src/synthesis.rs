@@ -19,7 +19,7 @@ use crate::decompose::{Border, ColourSpace, Pyramid};
 use crate::geometry::integrate::{Edges, normals_of_periodic};
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::relight::{SHADING_FLOOR, shading_factor};
-use crate::geometry::{detail_scale, quilt, resample_periodic, split_detail};
+use crate::geometry::{detail_scale, quilt, quilt_pair, resample_periodic, split_detail};
 use crate::model::{MaterialModel, ModelError, PeriodicPart, Result};
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
@@ -516,12 +516,24 @@ impl MaterialModel {
     /// torus, zero mean; `None` without an exemplar.
     fn exemplar_detail(&self, o: &SynthesisOptions) -> Option<Array2<f64>> {
         let e = self.exemplar()?;
-        let mut detail = quilt(
-            &e.samples(),
-            o.rows.max(1),
-            o.cols.max(1),
-            crate::mrf::noise::mix(o.seed, EXEMPLAR_SEED),
-        );
+        let (rows, cols) = (o.rows.max(1), o.cols.max(1));
+        // Registered with a range map sampled at every pixel: laid with the relief's own
+        // patches (the same quilt as range_heights), so colour and relief line up.
+        let registered = self
+            .range_map()
+            .filter(|m| m.step == 1 && (m.rows, m.cols) == (e.rows, e.cols));
+        let mut detail = match registered {
+            Some(map) if self.periodic().is_none() => {
+                let seed = crate::mrf::noise::mix(o.seed, RANGE_SEED);
+                quilt_pair(&map.samples(), &e.samples(), rows, cols, seed).1
+            }
+            _ => quilt(
+                &e.samples(),
+                rows,
+                cols,
+                crate::mrf::noise::mix(o.seed, EXEMPLAR_SEED),
+            ),
+        };
         detail -= detail.mean().unwrap_or(0.0);
         Some(detail)
     }

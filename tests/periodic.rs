@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use btfmrf::analysis::{AnalysisOptions, analyze};
+use btfmrf::analysis::{AnalysisOptions, EXEMPLAR_SIDE, analyze};
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction};
 use btfmrf::eval::artefacts::seam;
@@ -14,12 +14,16 @@ use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
 use ndarray::{Array2, Array3, s};
 
+/// The material's model with or without the periodic part; without it, also without the
+/// structure exemplar (whose quilt, laid with the relief's patches, copies whole periods too),
+/// so that the MRF alone is what the part is compared with.
 fn model(material: SyntheticMaterial, periodic: bool) -> MaterialModel {
     let btf = Btf::synthetic(material, 64, 5).unwrap();
     let options = AnalysisOptions {
         kind: ModelKind::Car2d,
         clusters: 6,
         periodic,
+        exemplar_side: if periodic { EXEMPLAR_SIDE } else { 0 },
         ..AnalysisOptions::default()
     };
     analyze(&btf, &options, &NoProgress).unwrap().0

@@ -87,12 +87,15 @@ pub struct Args {
     /// colours the material never shows (saturated specks on dark pixels).
     #[arg(long)]
     no_colour_matching: bool,
-    /// Largest side of the structure exemplar (pixels; 0: none) stored when there is no range
-    /// map, e.g. for a photograph: the L* of a centred crop, 2 bytes a pixel (32 KiB at the
-    /// default 128), quilted at synthesis to carry the material's structure finer than a third
-    /// of the crop, which second-order MRF models lose (cells, grains, stones); the MRF keeps the
-    /// coarser variation. The quilt costs synthesis time: a 768x768 image of a photograph's
-    /// model took 0.8-1.0 s with it and 0.25 s without on a 2-core machine.
+    /// Largest side of the structure exemplar (pixels; 0: none): the L* of a centred crop, 2
+    /// bytes a pixel (32 KiB at the default 128), quilted at synthesis to carry the
+    /// material's structure finer than a third of the crop, which second-order MRF models
+    /// lose (cells, grains, stones); the MRF keeps the coarser variation. Stored when there is
+    /// no range map (a photograph), and beside a range map sampled at every pixel of a
+    /// texture no larger than this (laid with the relief's own patches, so colour and relief
+    /// line up) when a check at analysis finds it brings the synthesis closer to the measured
+    /// images. The quilt costs synthesis time: a 768x768 image of a photograph's model took
+    /// 0.8-1.0 s with it and 0.25 s without on a 2-core machine.
     #[arg(long, default_value_t = btfmrf::analysis::EXEMPLAR_SIDE)]
     exemplar: usize,
     /// Do not look for a lattice. By default a material that repeats along both image axes (a
