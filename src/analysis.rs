@@ -219,19 +219,6 @@ pub fn analyze(
     // divided out before fitting, since synthesis applies it again (geometry::relight).
     let frontal = geometry::frontal_view(btf);
     let registered = range_map.as_ref().map(|m| m.registered(h, w));
-    // Without a range map the structure comes from an exemplar: the same centred crop of every
-    // subspace image, whose L* detail sets each subspace's gain.
-    let wanted = options.exemplar_side > 0 && options.colour_space == ColourSpace::Lab;
-    // With a range map sampled at every pixel (a texture of at most the exemplar's side), the
-    // exemplar is the whole image, registered with the map, and synthesis lays it with the
-    // relief's own patches (geometry::quilt_pair), so colour and relief structure line up.
-    let registered_whole = range_map
-        .as_ref()
-        .is_some_and(|m| m.step == 1 && h <= options.exemplar_side && w <= options.exemplar_side);
-    let crop = ((range_map.is_none() || registered_whole) && wanted).then(|| {
-        let (ch, cw) = (h.min(options.exemplar_side), w.min(options.exemplar_side));
-        ((h - ch) / 2, (w - cw) / 2, ch, cw)
-    });
     // A measured image (view v, light l) with the relief shading divided out where it is
     // registered: the frontal view, or, once a lattice is found, every view of the rectified
     // BTF (see below).
@@ -255,6 +242,21 @@ pub fn analyze(
         }
         _ => None,
     };
+    // Without a range map the structure comes from an exemplar: the same centred crop of every
+    // subspace image, whose L* detail sets each subspace's gain.
+    let wanted = options.exemplar_side > 0 && options.colour_space == ColourSpace::Lab;
+    // With a range map sampled at every pixel (a texture of at most the exemplar's side), the
+    // exemplar is the whole image, registered with the map, and synthesis lays it with the
+    // relief's own patches (geometry::quilt_pair), so colour and relief structure line up; a
+    // near-regular material's relief is laid on its lattice instead, and gets none.
+    let registered_whole = lattice.is_none()
+        && range_map.as_ref().is_some_and(|m| {
+            m.step == 1 && h <= options.exemplar_side && w <= options.exemplar_side
+        });
+    let crop = ((range_map.is_none() || registered_whole) && wanted).then(|| {
+        let (ch, cw) = (h.min(options.exemplar_side), w.min(options.exemplar_side));
+        ((h - ch) / 2, (w - cw) / 2, ch, cw)
+    });
     // On a lattice the relief is laid in step with the colour's period, so shading left in an
     // oblique view's representative would be applied twice, coherently (the knit at a 75
     // degree light came out 27 % too dark); a quilted relief falls anywhere and leaves it to
@@ -343,12 +345,7 @@ pub fn analyze(
         shares.push(share);
         crops.extend(lightness);
     }
-    // A near-regular material's relief is laid on its lattice, not quilted: no exemplar.
-    let exemplar = if periodic.is_some() && range_map.is_some() {
-        None
-    } else {
-        exemplar_from(&crops)
-    };
+    let exemplar = exemplar_from(&crops);
     report.warnings.extend(stationarity_warning(shares));
     // Where the exemplar is judged: up to four subspace representatives spread over the
     // clusters (an exemplar holds one light's detail; it must help under the others too).
@@ -385,9 +382,17 @@ pub fn analyze(
             let (Some(view), Some(light)) = (btf.views().get(v), btf.lights().get(l)) else {
                 continue;
             };
+            let scales = crate::eval::judge::scales_for(measured.dim().1.min(measured.dim().2));
+            let reference = crate::eval::judge::Signature::of(&measured, scales).ok();
             let add = |sum: Option<f64>, d: Option<f64>| sum.zip(d).map(|(s, d)| s + d);
-            with = add(with, structure_distance(&model, &measured, view, light)?);
-            without = add(without, structure_distance(&plain, &measured, view, light)?);
+            with = add(
+                with,
+                structure_distance(&model, reference.as_ref(), view, light)?,
+            );
+            without = add(
+                without,
+                structure_distance(&plain, reference.as_ref(), view, light)?,
+            );
         }
         match (with, without) {
             (Some(with), Some(without)) if with < without => model,
@@ -401,27 +406,28 @@ pub fn analyze(
 }
 
 /// The judge's structure distance between `model`'s synthesis at (`view`, `light`), at the
-/// measured size and seed 1, and the `measured` image there; `None` for an image too small
-/// for the judge.
+/// measured size and seed 1, and the measured image's `reference` signature; `None` where the
+/// image is too small for the judge.
 fn structure_distance(
     model: &MaterialModel,
-    measured: &Array3<f32>,
+    reference: Option<&crate::eval::judge::Signature>,
     view: &crate::btf::Direction,
     light: &crate::btf::Direction,
 ) -> Result<Option<f64>> {
-    let (_, rows, cols) = measured.dim();
+    let Some(reference) = reference else {
+        return Ok(None);
+    };
     let o = crate::synthesis::SynthesisOptions {
-        rows,
-        cols,
+        rows: model.height() as usize,
+        cols: model.width() as usize,
         seed: 1,
         tileable: false,
     };
     let synthesized = model.synthesize_image(view, light, &o)?;
-    let scales = crate::eval::judge::scales_for(rows.min(cols));
-    let signature = |image| crate::eval::judge::Signature::of(image, scales).ok();
-    Ok(signature(measured)
-        .zip(signature(&synthesized))
-        .map(|(reference, candidate)| candidate.compare(&reference).structure))
+    let scales = crate::eval::judge::scales_for(o.rows.min(o.cols));
+    Ok(crate::eval::judge::Signature::of(&synthesized, scales)
+        .ok()
+        .map(|candidate| candidate.compare(reference).structure))
 }
 
 /// Samples a stored tile keeps along an axis whose period is `period` pixels: one a pixel, at

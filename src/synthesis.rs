@@ -377,8 +377,27 @@ impl MaterialModel {
     /// An invalid size.
     pub fn synthesis_cache(&self, o: &SynthesisOptions) -> Result<SynthesisCache> {
         check(self, o)?;
-        let heights = self.range_heights(o);
-        Ok(self.empty_cache(o, heights, NoiseBank::kept()))
+        Ok(match self.laid_together(o) {
+            Some((heights, detail)) => self.cache_laid(o, heights, detail, NoiseBank::kept()),
+            None => self.empty_cache(o, self.range_heights(o), NoiseBank::kept()),
+        })
+    }
+
+    /// An empty cache holding the range map's heights and the exemplar detail laid with them
+    /// by one quilt ([`MaterialModel::laid_together`]).
+    fn cache_laid(
+        &self,
+        o: &SynthesisOptions,
+        heights: Array2<f64>,
+        detail: Array2<f64>,
+        noise: NoiseBank,
+    ) -> SynthesisCache {
+        let cache = self.empty_cache(o, Some(heights), noise);
+        cache
+            .structure
+            .set(Some(detail))
+            .expect("a new cache has no structure yet");
+        cache
     }
 
     fn empty_cache(
@@ -461,27 +480,34 @@ impl MaterialModel {
         o: &SynthesisOptions,
     ) -> Result<SynthesisCache> {
         check(self, o)?;
-        // The first image draws every band's noise (while the range map is resampled
-        // beside it); the others reuse it, in parallel.
-        let (heights, cache) = rayon::join(
-            || self.range_heights(o),
-            || -> Result<SynthesisCache> {
-                // One image alone draws its noise and lets it go (at 4096^2 a GMRF's noise
-                // is over 500 MB); more than one keep it to share.
-                let noise = if clusters.len() > 1 {
-                    NoiseBank::kept()
-                } else {
-                    NoiseBank::transient()
-                };
-                let cache = self.empty_cache(o, None, noise);
-                if let Some(&first) = clusters.first() {
-                    self.subspace_from_cache(&cache, first)?;
-                }
-                Ok(cache)
-            },
-        );
-        let mut cache = cache?;
-        cache.heights = heights;
+        // One image alone draws its noise and lets it go (at 4096^2 a GMRF's noise is over
+        // 500 MB); more than one keep it to share.
+        let noise = if clusters.len() > 1 {
+            NoiseBank::kept()
+        } else {
+            NoiseBank::transient()
+        };
+        let first = |cache: SynthesisCache| -> Result<SynthesisCache> {
+            if let Some(&first) = clusters.first() {
+                self.subspace_from_cache(&cache, first)?;
+            }
+            Ok(cache)
+        };
+        let cache = match self.laid_together(o) {
+            // The exemplar detail every image needs comes with the heights, from one quilt.
+            Some((heights, detail)) => first(self.cache_laid(o, heights, detail, noise))?,
+            None => {
+                // The first image draws every band's noise (while the range map is quilted
+                // beside it); the others reuse it, in parallel.
+                let (heights, cache) = rayon::join(
+                    || self.range_heights(o),
+                    || first(self.empty_cache(o, None, noise)),
+                );
+                let mut cache = cache?;
+                cache.heights = heights;
+                cache
+            }
+        };
         clusters
             .par_iter()
             .try_for_each(|&k| self.subspace_from_cache(&cache, k).map(|_| ()))?;
@@ -513,29 +539,42 @@ impl MaterialModel {
     }
 
     /// The exemplar's detail quilted ([`quilt`], seeded by the synthesis seed) onto the output
-    /// torus, zero mean; `None` without an exemplar.
+    /// torus, zero mean; `None` without an exemplar. An exemplar registered with the range map
+    /// is laid with the relief's own patches ([`MaterialModel::laid_together`]).
     fn exemplar_detail(&self, o: &SynthesisOptions) -> Option<Array2<f64>> {
+        if let Some((_, detail)) = self.laid_together(o) {
+            return Some(detail);
+        }
         let e = self.exemplar()?;
-        let (rows, cols) = (o.rows.max(1), o.cols.max(1));
-        // Registered with a range map sampled at every pixel: laid with the relief's own
-        // patches (the same quilt as range_heights), so colour and relief line up.
-        let registered = self
-            .range_map()
-            .filter(|m| m.step == 1 && (m.rows, m.cols) == (e.rows, e.cols));
-        let mut detail = match registered {
-            Some(map) if self.periodic().is_none() => {
-                let seed = crate::mrf::noise::mix(o.seed, RANGE_SEED);
-                quilt_pair(&map.samples(), &e.samples(), rows, cols, seed).1
-            }
-            _ => quilt(
-                &e.samples(),
-                rows,
-                cols,
-                crate::mrf::noise::mix(o.seed, EXEMPLAR_SEED),
-            ),
-        };
+        let mut detail = quilt(
+            &e.samples(),
+            o.rows.max(1),
+            o.cols.max(1),
+            crate::mrf::noise::mix(o.seed, EXEMPLAR_SEED),
+        );
         detail -= detail.mean().unwrap_or(0.0);
         Some(detail)
+    }
+
+    /// The range map's heights ([`MaterialModel::range_heights`], the same values) and the
+    /// exemplar's zero-mean detail from one quilt ([`quilt_pair`]), when the exemplar is
+    /// registered with a map sampled at every pixel and no lattice lays the relief: a pit in
+    /// the relief and its dark colour then stay together. `None` otherwise.
+    fn laid_together(&self, o: &SynthesisOptions) -> Option<(Array2<f64>, Array2<f64>)> {
+        let (map, e) = (self.range_map()?, self.exemplar()?);
+        if map.step != 1 || (map.rows, map.cols) != (e.rows, e.cols) || self.periodic().is_some() {
+            return None;
+        }
+        let seed = crate::mrf::noise::mix(o.seed, RANGE_SEED);
+        let (heights, mut detail) = quilt_pair(
+            &map.samples(),
+            &e.samples(),
+            o.rows.max(1),
+            o.cols.max(1),
+            seed,
+        );
+        detail -= detail.mean().unwrap_or(0.0);
+        Some((heights, detail))
     }
 
     /// The bump strength for `light`: the measured lights' fitted strengths
