@@ -20,6 +20,8 @@ const NO_LAYER: u32 = 0xffffffffu;
 @group(0) @binding(9) var<storage, read> mean_shade: array<f32>;
 // Per measured light, the bump strength k of the shading factor 1 + k (s - 1).
 @group(0) @binding(10) var<storage, read> light_strength: array<f32>;
+// Per (view * lights + light), the measured pair's gain (MaterialModel::pair_gain).
+@group(0) @binding(11) var<storage, read> pair_gain: array<f32>;
 
 // Mean of max(0, n . l) over the texture for the projected tangent-frame light direction q
 // (bilinear in the table).
@@ -36,7 +38,7 @@ fn mean_shading(q: vec2<f32>) -> f32 {
 }
 
 // The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
-// light) pairs blend their clusters' subspace images, then the range map's normal relights
+// light) pairs blend their clusters' subspace images (each at its pair's gain), then the range map's normal relights
 // the blend for the light by the factor 1 + k (s - 1) (floored at SHADING_FLOOR, which
 // mrf.rs defines from the CPU's), s = max(0, n . l) / mean shading, so
 // that the subspace images' own average shading is not applied twice, k the measured
@@ -61,9 +63,11 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
         for (var b = 0; b < 3; b++) {
             let w = iv.weight[a] * il.weight[b];
             if (w > 0.0) {
-                let layer = pair_layer[iv.index[a] * globals.counts.y + il.index[b]];
+                let pair = iv.index[a] * globals.counts.y + il.index[b];
+                let layer = pair_layer[pair];
                 if (layer != NO_LAYER) {
-                    sum += w * textureSampleGrad(subspaces, tex_sampler, in.uv, layer, ddx, ddy).rgb;
+                    let texel = textureSampleGrad(subspaces, tex_sampler, in.uv, layer, ddx, ddy).rgb;
+                    sum += w * pair_gain[pair] * texel;
                     total += w;
                 }
             }

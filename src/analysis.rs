@@ -15,8 +15,9 @@ use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceCl
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::{self, relight};
 use crate::model::{
-    AnyLevels, BandMarginals, Exemplar, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel,
-    MaterialParts, ModelError, ModelKind, PeriodicPart, RangeMap, Result, SubspaceModel, format,
+    AnyLevels, BandMarginals, Exemplar, MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS,
+    MAX_TILE_SAMPLES, MaterialModel, MaterialParts, ModelError, ModelKind, PeriodicPart, Principal,
+    RangeMap, Result, SubspaceModel, format,
 };
 use crate::mrf::{BandModel, KindVisitor, Levels, Repair, neighbourhood::MAX_ORDER};
 use crate::progress::Progress;
@@ -28,6 +29,10 @@ pub struct AnalysisOptions {
     pub kind: ModelKind,
     /// Number of subspace images c. Default: 20 (the survey's choice).
     pub clusters: usize,
+    /// Weight of the measured light and view directions beside the colour histograms in the
+    /// clustering (see [`ClusterOptions::direction_share`]; 0: histograms alone). Default:
+    /// [`crate::decompose::cluster::DIRECTION_SHARE`].
+    pub direction_share: f64,
     /// Pyramid levels; `None` picks as many as keep the coarsest band at least 16 pixels a
     /// side, at most 4.
     pub levels: Option<usize>,
@@ -58,10 +63,11 @@ pub struct AnalysisOptions {
     pub periodic: bool,
 }
 
-/// Default largest side of the structure exemplar, pixels (a 128 x 128 crop: 32 KiB).
+/// Default largest side of the structure exemplar, pixels (a 128 x 128 crop: 16 KiB a stored
+/// crop).
 pub const EXEMPLAR_SIDE: usize = 128;
-/// The largest exemplar side accepted: its 2 bytes a pixel must stay well inside a model
-/// file's payload limit.
+/// The largest exemplar side accepted: its byte a pixel must stay well inside a model file's
+/// payload limit.
 pub const MAX_EXEMPLAR_SIDE: usize = 1024;
 
 /// Largest stored range-map side, samples; larger maps are averaged down (a 128 x 128 map is
@@ -73,6 +79,7 @@ impl Default for AnalysisOptions {
         Self {
             kind: ModelKind::Car2d,
             clusters: 20,
+            direction_share: crate::decompose::cluster::DIRECTION_SHARE,
             levels: None,
             max_order: MAX_ORDER,
             seed: 1,
@@ -153,6 +160,12 @@ pub fn analyze(
     options: &AnalysisOptions,
     progress: &dyn Progress,
 ) -> Result<(MaterialModel, AnalysisReport)> {
+    if !(0.0..=100.0).contains(&options.direction_share) {
+        return Err(ModelError::parameter(
+            "--direction-share",
+            format!("{} is outside 0..=100", options.direction_share),
+        ));
+    }
     if options.clusters == 0 || options.clusters > 4096 {
         return Err(ModelError::parameter(
             "--clusters",
@@ -187,20 +200,11 @@ pub fn analyze(
         return Err(ModelError::parameter(
             "--exemplar",
             format!(
-                "{} is above {MAX_EXEMPLAR_SIDE} (2 MiB of the model file)",
+                "{} is above {MAX_EXEMPLAR_SIDE} (1 MiB of the model file per stored crop)",
                 options.exemplar_side
             ),
         ));
     }
-    let clustering = SubspaceClustering::fit(
-        btf,
-        &ClusterOptions {
-            clusters: options.clusters,
-            seed: options.seed,
-            ..ClusterOptions::default()
-        },
-        progress,
-    )?;
     let mut report = AnalysisReport::default();
     let range_map = if options.range_map {
         match estimate_range_map(btf, progress) {
@@ -219,6 +223,21 @@ pub fn analyze(
     // divided out before fitting, since synthesis applies it again (geometry::relight).
     let frontal = geometry::frontal_view(btf);
     let registered = range_map.as_ref().map(|m| m.registered(h, w));
+    let mut clustering = SubspaceClustering::fit(
+        btf,
+        &ClusterOptions {
+            clusters: options.clusters,
+            seed: options.seed,
+            direction_share: options.direction_share,
+            preferred: match (&range_map, &registered) {
+                (Some(map), Some(heights)) => deshadable(btf, frontal, map, heights),
+                _ => Vec::new(),
+            },
+            ..ClusterOptions::default()
+        },
+        progress,
+    )?;
+    let measured_luminance = std::mem::take(&mut clustering.luminance);
     // A measured image (view v, light l) with the relief shading divided out where it is
     // registered: the frontal view, or, once a lattice is found, every view of the rectified
     // BTF (see below).
@@ -277,13 +296,15 @@ pub fn analyze(
                     ))
                 })
                 .collect::<Result<Vec<_>>>()?;
-            let (basis, weights) = principal_periods(&periods);
             Some(PeriodicPart {
                 lattice: t,
                 rows: samples[0],
                 cols: samples[1],
-                basis,
-                weights,
+                periods: principal(
+                    &periods,
+                    (MAX_PERIOD_COMPONENTS, PERIOD_RESIDUAL),
+                    format::as_stored,
+                ),
                 heights: registered.as_ref().map(|h| {
                     let period = lattice::mean_tile(h, &t, samples);
                     format::as_stored(&period.iter().map(|&v| v as f32).collect::<Vec<_>>())
@@ -293,49 +314,65 @@ pub fn analyze(
         None => None,
     };
     progress.start("fitting models", clustering.clusters() as u64);
-    type Fitted = (SubspaceModel, Vec<AnalysisRepair>, f64, Option<Array2<f64>>);
-    let fitted: Vec<Fitted> = clustering
+    let fit = |k: usize, (v, l): (usize, usize)| -> Result<Fitted> {
+        let measured = btf.image(v, l)?;
+        let share = block_mean_share(&measured);
+        let mut image = deshaded(measured, v, l, all_views);
+        if let Some(p) = &periodic {
+            divide_by_period(&mut image, p, k);
+        }
+        let lightness = crop.map(|(y0, x0, ch, cw)| {
+            let [l, _, _] = ColourSpace::Lab.planes(&image);
+            l.slice(ndarray::s![y0..y0 + ch, x0..x0 + cw]).to_owned()
+        });
+        let (subspace, notes) = options.kind.visit(FitSubspace {
+            image: &image,
+            options,
+            levels,
+        });
+        let notes = notes
+            .into_iter()
+            .map(|(factor, level, repairs)| AnalysisRepair::Band {
+                subspace: k,
+                factor,
+                level,
+                repairs,
+            })
+            .collect();
+        Ok((
+            SubspaceModel {
+                representative: (v as u16, l as u16),
+                ..subspace
+            },
+            notes,
+            share,
+            lightness,
+        ))
+    };
+    let mut fitted: Vec<Fitted> = clustering
         .representatives
         .par_iter()
         .enumerate()
-        .map(|(k, &(v, l))| {
-            let measured = btf.image(v, l)?;
-            let share = block_mean_share(&measured);
-            let mut image = deshaded(measured, v, l, all_views);
-            if let Some(p) = &periodic {
-                divide_by_period(&mut image, p, k);
-            }
-            let lightness = crop.map(|(y0, x0, ch, cw)| {
-                let [l, _, _] = ColourSpace::Lab.planes(&image);
-                l.slice(ndarray::s![y0..y0 + ch, x0..x0 + cw]).to_owned()
-            });
-            let (subspace, notes) = options.kind.visit(FitSubspace {
-                image: &image,
-                options,
-                levels,
-            });
+        .map(|(k, &pair)| {
+            let f = fit(k, pair);
             progress.advance(1);
-            let notes = notes
-                .into_iter()
-                .map(|(factor, level, repairs)| AnalysisRepair::Band {
-                    subspace: k,
-                    factor,
-                    level,
-                    repairs,
-                })
-                .collect();
-            Ok((
-                SubspaceModel {
-                    representative: (v as u16, l as u16),
-                    ..subspace
-                },
-                notes,
-                share,
-                lightness,
-            ))
+            f
         })
         .collect::<Result<_>>()?;
     progress.finish();
+    // A preferred (de-shaded frontal) representative whose synthesis leaves the measured
+    // chromaticities gives way to its cluster's nearest member: dividing a grazing light's
+    // shading out can leave a texture whose independent colour factors combine into specks
+    // of a colour the material never shows (the leather at 75 degrees).
+    let unfit = off_chroma_subspaces(btf, &clustering, &fitted, periodic.as_ref())?;
+    let refitted = unfit
+        .par_iter()
+        .map(|&k| fit(k, clustering.nearest[k]))
+        .collect::<Result<Vec<_>>>()?;
+    for (k, f) in unfit.into_iter().zip(refitted) {
+        clustering.representatives[k] = clustering.nearest[k];
+        fitted[k] = f;
+    }
     let mut subspaces = Vec::with_capacity(fitted.len());
     let mut shares = Vec::with_capacity(fitted.len());
     let mut crops = Vec::with_capacity(fitted.len());
@@ -368,6 +405,7 @@ pub fn analyze(
         range_map,
         exemplar,
         periodic,
+        pair_gains: Vec::new(),
     })?;
     // An exemplar beside a range map is kept only where it brings the synthesis closer to the
     // measured images (on the leather, whose creases shade differently under every light, it
@@ -402,7 +440,166 @@ pub fn analyze(
     } else {
         model
     };
+    let model = with_pair_gains(model, &measured_luminance)?;
     Ok((model, report))
+}
+
+/// A fitted subspace model, the repairs its fit made, its measured image's block-mean share
+/// and its exemplar crop.
+type Fitted = (SubspaceModel, Vec<AnalysisRepair>, f64, Option<Array2<f64>>);
+
+/// Largest side at which analysis synthesizes a subspace image to check it (statistics of a
+/// texture do not need more).
+const CHECK_SIDE: usize = 256;
+
+/// The subspaces whose representative is a preferred image (not the cluster's nearest
+/// member) and whose synthesis (seed 1, at most [`CHECK_SIDE`] a side) has more pixels
+/// outside the chromaticities of the representative's view than the artefact sweep allows
+/// ([`crate::eval::artefacts::Detector::Chroma`]).
+fn off_chroma_subspaces(
+    btf: &Btf,
+    clustering: &SubspaceClustering,
+    fitted: &[Fitted],
+    periodic: Option<&PeriodicPart>,
+) -> Result<Vec<usize>> {
+    let preferred: Vec<usize> = (0..fitted.len())
+        .filter(|&k| clustering.representatives[k] != clustering.nearest[k])
+        .collect();
+    let Some(&first) = preferred.first() else {
+        return Ok(Vec::new());
+    };
+    let view = clustering.representatives[first].0;
+    let images = (0..btf.lights().len())
+        .map(|l| btf.image(view, l))
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    let support = crate::eval::artefacts::ChromaSupport::new(&images);
+    let limit = crate::eval::artefacts::Detector::Chroma.limit(0.0);
+    let probe = MaterialModel::new(MaterialParts {
+        views: btf.views().clone(),
+        lights: btf.lights().clone(),
+        width: btf.width(),
+        height: btf.height(),
+        cluster_table: clustering.labels.clone(),
+        subspaces: fitted.iter().map(|f| f.0.clone()).collect(),
+        range_map: None,
+        exemplar: None,
+        // Without a range map the period's heights go too; the colour period stays.
+        periodic: periodic
+            .cloned()
+            .map(|p| PeriodicPart { heights: None, ..p }),
+        pair_gains: Vec::new(),
+    })?;
+    let o = crate::synthesis::SynthesisOptions {
+        rows: (btf.height() as usize).min(CHECK_SIDE),
+        cols: (btf.width() as usize).min(CHECK_SIDE),
+        seed: 1,
+        tileable: false,
+    };
+    let shares = preferred
+        .par_iter()
+        .map(|&k| Ok(support.outliers(&probe.synthesize_subspace(k, &o)?)))
+        .collect::<Result<Vec<f64>>>()?;
+    Ok(preferred
+        .into_iter()
+        .zip(shares)
+        .filter(|&(_, share)| share > limit)
+        .map(|(k, _)| k)
+        .collect())
+}
+
+/// Which images (view-major) make the better subspace representatives: those of the view the
+/// range map is registered with (`frontal`, `heights`) under a light that lights the relief,
+/// whose relief shading analysis divides out (an oblique representative keeps its shading,
+/// and synthesis applies it again: on the built-in materials the texture judge's structure
+/// distance was 1.3-2.6x larger). Analysis still gives one up whose synthesis goes off-chroma
+/// ([`off_chroma_subspaces`]).
+fn deshadable(btf: &Btf, frontal: usize, map: &RangeMap, heights: &Array2<f64>) -> Vec<bool> {
+    let lights = btf.lights().len();
+    let lit: Vec<bool> = (0..lights)
+        .into_par_iter()
+        .map(|l| {
+            btf.lights().get(l).is_some_and(|light| {
+                relight::shading_factor(
+                    heights,
+                    geometry::integrate::Edges::Clamp,
+                    light.vector(),
+                    map.strength_of(l),
+                )
+                .is_some()
+            })
+        })
+        .collect();
+    (0..btf.image_count())
+        .map(|i| i / lights == frontal && lit[i % lights])
+        .collect()
+}
+
+/// Largest side at which [`with_pair_gains`] synthesizes the subspace images (means do not
+/// need more).
+const GAIN_SIDE: usize = 256;
+/// Gains are kept within `1 / MAX_GAIN ..= MAX_GAIN` (the file holds 1/16 to 15.7).
+const MAX_GAIN: f64 = 8.0;
+/// Below this mean linear luminance an image or a prediction is too dark for a ratio.
+const GAIN_DARK: f64 = 1e-4;
+
+/// `model` with its pair gains ([`MaterialParts::pair_gains`]): each measured pair's mean
+/// luminance (`measured`, view-major) over the mean of its subspace image as synthesized
+/// (seed 1, at most [`GAIN_SIDE`] a side) and relit for the pair's light as synthesis relights
+/// it. A pair or prediction too dark for a ratio keeps 1.
+fn with_pair_gains(model: MaterialModel, measured: &[f64]) -> Result<MaterialModel> {
+    let o = crate::synthesis::SynthesisOptions {
+        rows: (model.height() as usize).min(GAIN_SIDE),
+        cols: (model.width() as usize).min(GAIN_SIDE),
+        seed: 1,
+        tileable: false,
+    };
+    let cache = model.synthesis_cache(&o)?;
+    let luminance = (0..model.subspaces().len())
+        .into_par_iter()
+        .map(|k| Ok(relight::luminance(model.subspace_from_cache(&cache, k)?)))
+        .collect::<Result<Vec<_>>>()?;
+    // Per light, each subspace image's mean after relighting (bump_relight's factor).
+    let relit_means: Vec<Vec<f64>> = (0..model.lights().len())
+        .into_par_iter()
+        .map(|l| {
+            let factor = match (cache.heights(), model.lights().get(l)) {
+                (Some(h), Some(light)) => crate::synthesis::relief_factor(
+                    h,
+                    geometry::integrate::Edges::Wrap,
+                    light,
+                    model.range_map().map_or(1.0, |m| m.strength_of(l)),
+                ),
+                _ => None,
+            };
+            luminance
+                .iter()
+                .map(|y| {
+                    let mean = match &factor {
+                        Some(f) => (y * f).mean(),
+                        None => y.mean(),
+                    };
+                    mean.unwrap_or(0.0)
+                })
+                .collect()
+        })
+        .collect();
+    let lights = model.lights().len();
+    let gains: Vec<f32> = measured
+        .iter()
+        .enumerate()
+        .map(|(i, &m)| {
+            let k = usize::from(model.cluster_table()[i]);
+            let predicted = relit_means[i % lights][k];
+            if m > GAIN_DARK && predicted > GAIN_DARK {
+                (m / predicted).clamp(1.0 / MAX_GAIN, MAX_GAIN) as f32
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let mut parts = model.into_parts();
+    parts.pair_gains = format::as_stored_gains(&gains);
+    MaterialModel::new(parts)
 }
 
 /// The judge's structure distance between `model`'s synthesis at (`view`, `light`), at the
@@ -456,20 +653,25 @@ fn mean_period(image: &Array3<f32>, lattice: &Lattice, samples: [usize; 2]) -> V
 /// Share of the periods' variance around their mean that the stored deviations may leave out.
 const PERIOD_RESIDUAL: f64 = 1e-3;
 
-/// The subspace images' `periods` (logarithms) as the model stores them: their mean and the fewest principal
-/// deviations (at most [`MAX_PERIOD_COMPONENTS`]) that leave at most [`PERIOD_RESIDUAL`] of the
-/// variance around the mean, each quantised as the file keeps it, with each period's weights
-/// on them (its projections). Principal directions from the small Gram matrix of the periods.
-fn principal_periods(periods: &[Vec<f64>]) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
-    let n = periods.len();
-    let len = periods.first().map_or(0, Vec::len);
+/// One field per subspace image (`fields`, all of one length) as the model stores them: their
+/// mean and the fewest principal deviations (at most `max_deviations`) that leave at most
+/// `residual` of the variance around the mean, each quantised as the file keeps it
+/// (`stored`), with each field's weights on them (its projections). Principal directions from
+/// the small Gram matrix of the fields.
+fn principal(
+    fields: &[Vec<f64>],
+    (max_deviations, residual): (usize, f64),
+    stored: fn(&[f32]) -> Vec<f32>,
+) -> Principal {
+    let n = fields.len();
+    let len = fields.first().map_or(0, Vec::len);
     let mut mean = vec![0.0; len];
-    for p in periods {
+    for p in fields {
         for (m, v) in mean.iter_mut().zip(p) {
             *m += v / n as f64;
         }
     }
-    let deviations: Vec<Vec<f64>> = periods
+    let deviations: Vec<Vec<f64>> = fields
         .iter()
         .map(|p| p.iter().zip(&mean).map(|(v, m)| v - m).collect())
         .collect();
@@ -483,14 +685,14 @@ fn principal_periods(periods: &[Vec<f64>]) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
     let mut captured = 0.0;
     for &j in &order {
         let lambda = eigen.eigenvalues[j];
-        if kept.len() == MAX_PERIOD_COMPONENTS
-            || captured >= (1.0 - PERIOD_RESIDUAL) * total
+        if kept.len() == max_deviations
+            || captured >= (1.0 - residual) * total
             || lambda <= 1e-12 * total.max(f64::MIN_POSITIVE)
         {
             break;
         }
         captured += lambda;
-        // A unit direction in period space: the deviations combined by the eigenvector.
+        // A unit direction in field space: the deviations combined by the eigenvector.
         let mut direction = vec![0.0; len];
         for (i, d) in deviations.iter().enumerate() {
             let u = eigen.eigenvectors[(i, j)] / lambda.sqrt();
@@ -500,7 +702,7 @@ fn principal_periods(periods: &[Vec<f64>]) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
         }
         kept.push(direction);
     }
-    let stored = |v: &[f64]| format::as_stored(&v.iter().map(|&x| x as f32).collect::<Vec<_>>());
+    let stored = |v: &[f64]| stored(&v.iter().map(|&x| x as f32).collect::<Vec<_>>());
     let mut basis = vec![stored(&mean)];
     basis.extend(kept.iter().map(|d| stored(d)));
     let wide: Vec<Vec<f64>> = basis[1..]
@@ -515,7 +717,7 @@ fn principal_periods(periods: &[Vec<f64>]) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
                 .collect()
         })
         .collect();
-    (basis, weights)
+    Principal { basis, weights }
 }
 
 /// The share of the tile's mean luminance below which the divisor is floored: the dark gaps
@@ -574,29 +776,33 @@ fn clamp_log_tails(ratio: Array2<f64>) -> Array2<f64> {
     ratio.mapv(|r| r.max(f64::MIN_POSITIVE).ln().clamp(lo, hi).exp())
 }
 
-/// The structure exemplar from the L* crops of the subspace images (none without crops): the
-/// first subspace's crop, and every subspace's detail contrast over it as its gain.
+/// Share of the exemplar crops' variance around their mean that the stored deviations may
+/// leave out.
+const EXEMPLAR_RESIDUAL: f64 = 0.05;
+
+/// Bytes the exemplar's stored crops may take: at the default 128 x 128 crop, the mean and
+/// three deviations. Measured (issue 11, built-in materials at 128^2, 10 clusters, 9 lights):
+/// the texture judge's structure distance improved by 5 % from one to three deviations and
+/// by 5 % more from three to six.
+const EXEMPLAR_BUDGET: usize = 64 << 10;
+
+/// The structure exemplar from the L* crops of the subspace images (none without crops): their
+/// mean and principal deviations, with each subspace's weights.
 fn exemplar_from(crops: &[Array2<f64>]) -> Option<Exemplar> {
-    let first = crops.first()?;
-    let (rows, cols) = first.dim();
-    let sigma = geometry::detail_scale(rows, cols);
-    let contrast = |c: &Array2<f64>| geometry::split_detail(c, sigma, false).1.std(0.0);
-    let reference = contrast(first);
-    let gains = crops
-        .iter()
-        .map(|c| {
-            if reference > 0.0 {
-                (contrast(c) / reference) as f32
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let (rows, cols) = crops.first()?.dim();
+    // One byte a sample per stored crop.
+    let deviations = (EXEMPLAR_BUDGET / (rows * cols).max(1))
+        .saturating_sub(1)
+        .min(MAX_EXEMPLAR_COMPONENTS);
+    let fields: Vec<Vec<f64>> = crops.iter().map(|c| c.iter().copied().collect()).collect();
     Some(Exemplar {
         rows,
         cols,
-        lightness: format::as_stored(&first.iter().map(|&v| v as f32).collect::<Vec<_>>()),
-        gains,
+        lightness: principal(
+            &fields,
+            (deviations, EXEMPLAR_RESIDUAL),
+            format::as_stored_bytes,
+        ),
     })
 }
 
@@ -752,19 +958,8 @@ where
 mod tests {
     use super::*;
 
-    /// Reconstructs period `k` from the stored mean, deviations and weights.
-    fn rebuilt(basis: &[Vec<f32>], weights: &[Vec<f32>], k: usize) -> Vec<f64> {
-        let mut v: Vec<f64> = basis[0].iter().map(|&x| f64::from(x)).collect();
-        for (w, b) in weights[k].iter().zip(&basis[1..]) {
-            for (x, &y) in v.iter_mut().zip(b) {
-                *x += f64::from(*w) * f64::from(y);
-            }
-        }
-        v
-    }
-
     #[test]
-    fn principal_periods_keep_the_deviations_the_periods_have() {
+    fn principal_fields_keep_the_deviations_the_periods_have() {
         // Six periods: a common pattern, brightness and a colour-like second pattern varying.
         let base = |i: usize| 0.5 + 0.3 * ((i * 7 % 11) as f64 / 11.0);
         let other = |i: usize| ((i * 5 % 13) as f64 / 13.0) - 0.5;
@@ -774,19 +969,32 @@ mod tests {
                 (0..48).map(|i| a * base(i) + b * other(i)).collect()
             })
             .collect();
-        let (basis, weights) = principal_periods(&periods);
-        assert_eq!(basis.len(), 3, "mean and two deviations");
-        assert_eq!(weights.len(), 6);
-        for (k, p) in periods.iter().enumerate() {
-            let worst = rebuilt(&basis, &weights, k)
+        let p = principal(
+            &periods,
+            (MAX_PERIOD_COMPONENTS, PERIOD_RESIDUAL),
+            format::as_stored,
+        );
+        assert_eq!(p.basis.len(), 3, "mean and two deviations");
+        assert_eq!(p.weights.len(), 6);
+        for (k, period) in periods.iter().enumerate() {
+            let worst = p
+                .combined(k)
+                .unwrap()
                 .iter()
-                .zip(p)
+                .zip(period)
                 .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
             assert!(worst < 1e-3, "period {k}: {worst}");
         }
+        // At most the deviations asked for.
+        let p = principal(&periods, (1, PERIOD_RESIDUAL), format::as_stored);
+        assert_eq!(p.basis.len(), 2);
         // Equal periods need no deviation.
-        let (basis, weights) = principal_periods(&vec![periods[0].clone(); 4]);
-        assert_eq!(basis.len(), 1);
-        assert!(weights.iter().all(Vec::is_empty));
+        let p = principal(
+            &vec![periods[0].clone(); 4],
+            (MAX_PERIOD_COMPONENTS, PERIOD_RESIDUAL),
+            format::as_stored,
+        );
+        assert_eq!(p.basis.len(), 1);
+        assert!(p.weights.iter().all(Vec::is_empty));
     }
 }

@@ -19,8 +19,8 @@ use crate::decompose::{Border, ColourSpace, Pyramid};
 use crate::geometry::integrate::{Edges, normals_of_periodic};
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::relight::{SHADING_FLOOR, shading_factor};
-use crate::geometry::{detail_scale, quilt, quilt_pair, resample_periodic, split_detail};
-use crate::model::{MaterialModel, ModelError, PeriodicPart, Result};
+use crate::geometry::{detail_scale, quilt, quilt_laid, resample_periodic, split_detail};
+use crate::model::{Exemplar, MaterialModel, ModelError, PeriodicPart, Result};
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
 
@@ -51,8 +51,9 @@ pub struct SynthesisCache {
     subspaces: Vec<OnceLock<Array3<f32>>>,
     heights: Option<Array2<f64>>,
     normals: OnceLock<Option<Array3<f64>>>,
-    /// The quilted exemplar detail (zero mean), made on first use; `None` without an exemplar.
-    structure: OnceLock<Option<Array2<f64>>>,
+    /// The exemplar's basis crops quilted with one layout (zero mean each), made on first use;
+    /// `None` without an exemplar.
+    structure: OnceLock<Option<Vec<Array2<f64>>>>,
     noise: NoiseBank,
 }
 
@@ -235,7 +236,7 @@ impl MaterialModel {
         k: usize,
         o: &SynthesisOptions,
         noise: &NoiseBank,
-        structure: &OnceLock<Option<Array2<f64>>>,
+        structure: &OnceLock<Option<Vec<Array2<f64>>>>,
     ) -> Result<Array3<f32>> {
         let s = self.subspaces().get(k).ok_or_else(|| {
             ModelError::parameter("subspace", format!("{k} of {}", self.subspaces().len()))
@@ -282,13 +283,17 @@ impl MaterialModel {
         });
         if let Some(e) = self.exemplar()
             && s.kl.space == ColourSpace::Lab
-            && let Some(detail) = structure.get_or_init(|| self.exemplar_detail(o)).as_ref()
+            && let Some(details) = structure.get_or_init(|| self.exemplar_details(o)).as_ref()
+            && let Some(coefficients) = e.lightness.coefficients(k)
         {
-            // The MRF's L* keeps what is coarser than the exemplar's patches; the quilted
-            // exemplar, at this subspace's contrast, brings the structure finer than them.
+            // The MRF's L* keeps what is coarser than the exemplar's patches; this subspace's
+            // quilted crop (its weights on the quilted basis) brings the structure finer.
             let sigma = detail_scale(e.rows, e.cols);
-            let (coarse, _) = split_detail(&colours[0], sigma, o.tileable);
-            colours[0] = coarse + detail * f64::from(e.gains[k]);
+            let (mut lightness, _) = split_detail(&colours[0], sigma, o.tileable);
+            for (c, detail) in coefficients.into_iter().zip(details) {
+                lightness.scaled_add(c, detail);
+            }
+            colours[0] = lightness;
         }
         if let Some(c) = &s.colour_marginals {
             c.transfer(&mut colours);
@@ -347,15 +352,26 @@ impl MaterialModel {
         view: &Direction,
         light: &Direction,
     ) -> Result<BTreeMap<usize, f64>> {
+        self.weights_by_cluster(view, light, false)
+    }
+
+    /// The pairs' weights summed per cluster, each times its pair's gain when `gained`.
+    fn weights_by_cluster(
+        &self,
+        view: &Direction,
+        light: &Direction,
+        gained: bool,
+    ) -> Result<BTreeMap<usize, f64>> {
         let mut weights = BTreeMap::new();
         for (v, l, w) in self.neighbouring_pairs(view, light)? {
-            *weights.entry(self.cluster_of(v, l)?).or_insert(0.0) += w;
+            let gain = if gained { self.pair_gain(v, l) } else { 1.0 };
+            *weights.entry(self.cluster_of(v, l)?).or_insert(0.0) += w * gain;
         }
         Ok(weights)
     }
 
     /// The BTF image for (view, light): the subspace images of the nearest measured pairs,
-    /// blended by their barycentric weights, then relit by bump mapping with the range map
+    /// blended by their barycentric weights times the pairs' gains, then relit by bump mapping with the range map
     /// (when the model has one). Only the subspaces needed are synthesized.
     ///
     /// # Errors
@@ -383,19 +399,19 @@ impl MaterialModel {
         })
     }
 
-    /// An empty cache holding the range map's heights and the exemplar detail laid with them
+    /// An empty cache holding the range map's heights and the exemplar details laid with them
     /// by one quilt ([`MaterialModel::laid_together`]).
     fn cache_laid(
         &self,
         o: &SynthesisOptions,
         heights: Array2<f64>,
-        detail: Array2<f64>,
+        details: Vec<Array2<f64>>,
         noise: NoiseBank,
     ) -> SynthesisCache {
         let cache = self.empty_cache(o, Some(heights), noise);
         cache
             .structure
-            .set(Some(detail))
+            .set(Some(details))
             .expect("a new cache has no structure yet");
         cache
     }
@@ -431,7 +447,8 @@ impl MaterialModel {
     ) -> Result<Array3<f32>> {
         let o = &cache.options;
         let mut out: Option<Array3<f32>> = None;
-        for (k, w) in self.subspace_weights(view, light)? {
+        // Each measured pair brings its subspace image at its own brightness (its gain).
+        for (k, w) in self.weights_by_cluster(view, light, true)? {
             let part = self.subspace_from_cache(cache, k)?;
             match &mut out {
                 None => out = Some(part.mapv(|v| w as f32 * v)),
@@ -538,43 +555,43 @@ impl MaterialModel {
         Some(resample_periodic(&torus, rows.max(1), cols.max(1)))
     }
 
-    /// The exemplar's detail quilted ([`quilt`], seeded by the synthesis seed) onto the output
-    /// torus, zero mean; `None` without an exemplar. An exemplar registered with the range map
-    /// is laid with the relief's own patches ([`MaterialModel::laid_together`]).
-    fn exemplar_detail(&self, o: &SynthesisOptions) -> Option<Array2<f64>> {
-        if let Some((_, detail)) = self.laid_together(o) {
-            return Some(detail);
+    /// The exemplar's basis crops quilted onto the output torus with one layout (chosen on the
+    /// first subspace's crop, seeded by the synthesis seed), zero mean each; `None` without an
+    /// exemplar. An exemplar registered with the range map is laid with the relief's own
+    /// patches instead ([`MaterialModel::laid_together`]).
+    fn exemplar_details(&self, o: &SynthesisOptions) -> Option<Vec<Array2<f64>>> {
+        if let Some((_, details)) = self.laid_together(o) {
+            return Some(details);
         }
         let e = self.exemplar()?;
-        let mut detail = quilt(
-            &e.samples(),
+        let (_, details) = quilt_laid(
+            &e.crop(0)?,
+            &exemplar_planes(e),
             o.rows.max(1),
             o.cols.max(1),
             crate::mrf::noise::mix(o.seed, EXEMPLAR_SEED),
         );
-        detail -= detail.mean().unwrap_or(0.0);
-        Some(detail)
+        Some(zero_mean(details))
     }
 
     /// The range map's heights ([`MaterialModel::range_heights`], the same values) and the
-    /// exemplar's zero-mean detail from one quilt ([`quilt_pair`]), when the exemplar is
+    /// exemplar's zero-mean basis details from one quilt ([`quilt_laid`]), when the exemplar is
     /// registered with a map sampled at every pixel and no lattice lays the relief: a pit in
     /// the relief and its dark colour then stay together. `None` otherwise.
-    fn laid_together(&self, o: &SynthesisOptions) -> Option<(Array2<f64>, Array2<f64>)> {
+    fn laid_together(&self, o: &SynthesisOptions) -> Option<(Array2<f64>, Vec<Array2<f64>>)> {
         let (map, e) = (self.range_map()?, self.exemplar()?);
         if map.step != 1 || (map.rows, map.cols) != (e.rows, e.cols) || self.periodic().is_some() {
             return None;
         }
         let seed = crate::mrf::noise::mix(o.seed, RANGE_SEED);
-        let (heights, mut detail) = quilt_pair(
+        let (heights, details) = quilt_laid(
             &map.samples(),
-            &e.samples(),
+            &exemplar_planes(e),
             o.rows.max(1),
             o.cols.max(1),
             seed,
         );
-        detail -= detail.mean().unwrap_or(0.0);
-        Some((heights, detail))
+        Some((heights, zero_mean(details)))
     }
 
     /// The bump strength for `light`: the measured lights' fitted strengths
@@ -607,6 +624,21 @@ fn output_lattice(p: &PeriodicPart, o: &SynthesisOptions) -> Lattice {
 
 /// Mixed into the synthesis seed for the range map's quilt (the bands use their own indices).
 const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
+/// The exemplar's basis crops (mean, then deviations) as planes.
+fn exemplar_planes(e: &Exemplar) -> Vec<Array2<f64>> {
+    (0..e.lightness.basis.len())
+        .filter_map(|j| e.plane(j))
+        .collect()
+}
+
+/// `fields`, each less its mean.
+fn zero_mean(mut fields: Vec<Array2<f64>>) -> Vec<Array2<f64>> {
+    for f in &mut fields {
+        *f -= f.mean().unwrap_or(0.0);
+    }
+    fields
+}
+
 /// Mixed into the synthesis seed for the exemplar's quilt.
 const EXEMPLAR_SEED: u64 = 0x6578_656d_706c_6172;
 
@@ -625,16 +657,29 @@ pub fn bump_relight(
     light: &Direction,
     strength: f64,
 ) {
-    let l = light.vector();
-    let Some(factor) = shading_factor(heights, border, [l[0], l[1], l[2]], strength) else {
+    let Some(factor) = relief_factor(heights, border, light, strength) else {
         return;
     };
     image
         .axis_iter_mut(Axis(0))
         .into_par_iter()
         .for_each(|mut channel| {
-            channel.zip_mut_with(&factor, |v, s| *v *= s.max(SHADING_FLOOR) as f32);
+            channel.zip_mut_with(&factor, |v, &s| *v *= s as f32);
         });
+}
+
+/// The factor [`bump_relight`] multiplies every channel by: the relief's shading factor
+/// under `light` at `strength` ([`shading_factor`]), floored at [`SHADING_FLOOR`]; `None`
+/// where the light leaves the relief unlit (the image is left as it is).
+pub fn relief_factor(
+    heights: &Array2<f64>,
+    border: Edges,
+    light: &Direction,
+    strength: f64,
+) -> Option<Array2<f64>> {
+    let l = light.vector();
+    shading_factor(heights, border, [l[0], l[1], l[2]], strength)
+        .map(|f| f.mapv(|s| s.max(SHADING_FLOOR)))
 }
 
 #[cfg(test)]

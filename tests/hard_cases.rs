@@ -303,12 +303,17 @@ mod mrf_cases {
             two[1].clone(),
             two[0].clone(),
         ]);
-        let options = AnalysisOptions {
-            clusters: 20,
-            ..AnalysisOptions::default()
-        };
-        let (model, _) = analyze(&btf, &options, &NoProgress).unwrap();
-        assert_eq!(model.subspaces().len(), 2);
+        // On histograms alone two distinct images make two subspaces; with the directions
+        // every image (each under its own light) may have its own, and no more.
+        for (share, subspaces) in [(0.0, 2), (AnalysisOptions::default().direction_share, 5)] {
+            let options = AnalysisOptions {
+                clusters: 20,
+                direction_share: share,
+                ..AnalysisOptions::default()
+            };
+            let (model, _) = analyze(&btf, &options, &NoProgress).unwrap();
+            assert_eq!(model.subspaces().len(), subspaces, "share {share}");
+        }
     }
 
     #[test]

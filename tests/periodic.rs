@@ -142,7 +142,7 @@ fn a_default_knit_model_stays_within_the_size_budget() {
     );
     println!(
         "knit 128^2, 20 subspaces: model {bytes} bytes, periodic part {part} bytes ({} deviations)",
-        p.basis.len() - 1
+        p.periods.basis.len() - 1
     );
     assert!(bytes <= 150 * 1024, "{bytes}");
 }

@@ -75,7 +75,7 @@ impl Layout {
 /// # Panics
 /// An empty source or a zero output size (callers check both).
 pub fn quilt(source: &Array2<f64>, rows: usize, cols: usize, seed: u64) -> Array2<f64> {
-    quilt_patches(source, None, rows, cols, seed).0
+    quilt_patches(source, &[], rows, cols, seed).0
 }
 
 /// The Gaussian scale (samples) below which [`quilt`] keeps a `rows` x `cols` source's
@@ -93,48 +93,59 @@ pub fn split_detail(field: &Array2<f64>, sigma: f64, wrap: bool) -> (Array2<f64>
     (field - &detail, detail)
 }
 
-/// Quilts `source` like [`quilt`] and lays `companion` (a field registered with it, same
-/// shape, e.g. the lightness of the images the relief was measured from) with the very same
-/// patches and cuts, so that structure shared by the two (a pit in the relief and its dark
-/// colour) lines up in the output as in the measurement. Returns (source, companion) quilts.
+/// Quilts `source` like [`quilt`] and lays each of `companions` (fields registered with it,
+/// same shape, e.g. the lightness of the images the relief was measured from) with the very
+/// same patches and cuts, so that structure shared by them (a pit in the relief and its dark
+/// colour) lines up in the output as in the measurement. Returns the source's quilt and one
+/// quilt per companion. A companion's quilt is linear in the companion up to its mean: the
+/// quilt of a weighted sum is the weighted sum of the quilts plus a constant.
 ///
 /// # Panics
-/// Shapes that differ, an empty source or a zero output size.
-pub fn quilt_pair(
+/// A companion's shape differs from the source's, an empty source or a zero output size.
+pub fn quilt_laid(
     source: &Array2<f64>,
-    companion: &Array2<f64>,
+    companions: &[Array2<f64>],
     rows: usize,
     cols: usize,
     seed: u64,
-) -> (Array2<f64>, Array2<f64>) {
-    assert_eq!(source.dim(), companion.dim(), "a registered companion");
-    let (heights, _, laid) = quilt_patches(source, Some(companion), rows, cols, seed);
-    (heights, laid.expect("a companion was given"))
+) -> (Array2<f64>, Vec<Array2<f64>>) {
+    assert!(
+        companions.iter().all(|c| c.dim() == source.dim()),
+        "registered companions"
+    );
+    let (heights, _, laid) = quilt_patches(source, companions, rows, cols, seed);
+    (heights, laid)
 }
 
-/// [`quilt`], with the index of the patch every sample came from, and `companion` laid with
-/// the same patches (see [`quilt_pair`]).
+/// [`quilt`], with the index of the patch every sample came from, and `companions` laid with
+/// the same patches (see [`quilt_laid`]).
 fn quilt_patches(
     source: &Array2<f64>,
-    companion: Option<&Array2<f64>>,
+    companions: &[Array2<f64>],
     rows: usize,
     cols: usize,
     seed: u64,
-) -> (Array2<f64>, Array2<u32>, Option<Array2<f64>>) {
+) -> (Array2<f64>, Array2<u32>, Vec<Array2<f64>>) {
     let (sr, sc) = source.dim();
     assert!(sr > 0 && sc > 0 && rows > 0 && cols > 0, "empty quilt");
     let patch = (sr.min(sc) / PATCH_DIVISOR).clamp(PATCH_SIDE.0, PATCH_SIDE.1);
     let overlap = (patch / OVERLAP_DIVISOR).max(1);
     let sigma = patch as f64 / 2.0;
     let source = &high_pass(source, sigma, false);
-    let companion = companion.map(|c| high_pass(c, sigma, false));
-    // The companion's differences, laid like the source's.
-    let mut companion_steps = companion.as_ref().map(|_| {
-        (
-            Array2::<f64>::zeros((rows, cols)),
-            Array2::<f64>::zeros((rows, cols)),
-        )
-    });
+    let companions: Vec<Array2<f64>> = companions
+        .iter()
+        .map(|c| high_pass(c, sigma, false))
+        .collect();
+    // The companions' differences (to the right, downward), laid like the source's.
+    let mut companion_steps: Vec<(Array2<f64>, Array2<f64>)> = companions
+        .iter()
+        .map(|_| {
+            (
+                Array2::<f64>::zeros((rows, cols)),
+                Array2::<f64>::zeros((rows, cols)),
+            )
+        })
+        .collect();
     let (lr, lc) = (
         Layout::new(rows, patch.min(sr), overlap),
         Layout::new(cols, patch.min(sc), overlap),
@@ -186,9 +197,7 @@ fn quilt_patches(
                     if y + 1 < hr && (taken[(y, x)] || taken[(y + 1, x)]) {
                         down[p] = src(y + 1, x) - src(y, x);
                     }
-                    if let (Some(c), Some((c_right, c_down))) =
-                        (&companion, companion_steps.as_mut())
-                    {
+                    for (c, (c_right, c_down)) in companions.iter().zip(&mut companion_steps) {
                         let at_c = |y: usize, x: usize| c[((y0 + y) % sr, (x0 + x) % sc)];
                         if x + 1 < hc && (taken[(y, x)] || taken[(y, x + 1)]) {
                             c_right[p] = at_c(y, x + 1) - at_c(y, x);
@@ -207,11 +216,15 @@ fn quilt_patches(
     // wander; take out what the result holds above the patch scale, keep the source's mean.
     let mut out = high_pass(&integrate_on_torus(&right, &down), sigma, true);
     out += source.mean().unwrap_or(0.0) - out.mean().unwrap_or(0.0);
-    let laid = companion.zip(companion_steps).map(|(c, (r, d))| {
-        let mut laid = high_pass(&integrate_on_torus(&r, &d), sigma, true);
-        laid += c.mean().unwrap_or(0.0) - laid.mean().unwrap_or(0.0);
-        laid
-    });
+    let laid = companions
+        .par_iter()
+        .zip(companion_steps)
+        .map(|(c, (r, d))| {
+            let mut laid = high_pass(&integrate_on_torus(&r, &d), sigma, true);
+            laid += c.mean().unwrap_or(0.0) - laid.mean().unwrap_or(0.0);
+            laid
+        })
+        .collect();
     (out, label, laid)
 }
 
@@ -459,7 +472,7 @@ mod tests {
     #[test]
     fn cuts_are_as_smooth_as_the_interior() {
         let source = ridges(100, 100, 1);
-        let (heights, patch, _) = quilt_patches(&source, None, 240, 200, 7);
+        let (heights, patch, _) = quilt_patches(&source, &[], 240, 200, 7);
         let (same, cut) = neighbour_steps(&Quilt { heights, patch });
         println!("neighbour step: within patches {same:.4}, across cuts {cut:.4}");
         assert!(cut < 2.5 * same, "cut {cut} vs interior {same}");
@@ -487,7 +500,7 @@ mod tests {
             let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
             let source = ridges(43, 64, 10 + seed)
                 + Array2::from_shape_fn((43, 64), |_| rng.random_range(-0.5..0.5));
-            let (q, patch, _) = quilt_patches(&source, None, 256, 256, seed);
+            let (q, patch, _) = quilt_patches(&source, &[], 256, 256, seed);
             let (same, _) = neighbour_steps(&Quilt {
                 heights: q.clone(),
                 patch: patch.clone(),
@@ -519,16 +532,18 @@ mod tests {
     }
 
     #[test]
-    fn a_companion_is_laid_with_the_sources_own_patches() {
+    fn companions_are_laid_with_the_sources_own_patches() {
         let source = ridges(60, 70, 11);
         let alone = quilt(&source, 150, 130, 4);
         // A companion that is an affine copy of the source comes out as the same copy of the
         // source's quilt (the same patches, cuts and integration), and the source's quilt is
-        // not changed by having one.
+        // not changed by having companions.
         let companion = source.mapv(|v| 3.0 - 2.0 * v);
-        let (heights, laid) = quilt_pair(&source, &companion, 150, 130, 4);
+        let other = ridges(60, 70, 12);
+        let mix = &other * 0.5 - &companion * 2.0;
+        let (heights, laid) = quilt_laid(&source, &[companion, other.clone(), mix], 150, 130, 4);
         assert_eq!(heights, alone);
-        for (a, b) in laid.iter().zip(&alone) {
+        for (a, b) in laid[0].iter().zip(&alone) {
             assert!(
                 (a - (3.0 - 2.0 * b)).abs() < 1e-9,
                 "{a} vs {}",
@@ -537,10 +552,14 @@ mod tests {
         }
         // An unrelated companion is laid, not quilted on its own: another seed's quilt of it
         // differs, this one follows the source's layout.
-        let other = ridges(60, 70, 12);
-        let (_, laid) = quilt_pair(&source, &other, 150, 130, 4);
-        assert_ne!(laid, quilt(&other, 150, 130, 4));
-        assert_eq!(laid.dim(), (150, 130));
+        assert_ne!(laid[1], quilt(&other, 150, 130, 4));
+        assert_eq!(laid[1].dim(), (150, 130));
+        // Linear up to the mean: a weighted sum's quilt is the weighted sum of the quilts.
+        let summed = &laid[1] * 0.5 - &laid[0] * 2.0;
+        let shift = laid[2].mean().unwrap() - summed.mean().unwrap();
+        for (a, b) in laid[2].iter().zip(&summed) {
+            assert!((a - b - shift).abs() < 1e-9, "{a} vs {b} + {shift}");
+        }
     }
 
     #[test]

@@ -4,8 +4,8 @@
 use std::path::Path;
 
 use super::material::{
-    BandMarginals, Exemplar, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
-    PeriodicPart, RangeMap, SubspaceModel,
+    BandMarginals, Exemplar, MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES,
+    MaterialModel, MaterialParts, PeriodicPart, Principal, RangeMap, SubspaceModel,
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
@@ -21,8 +21,9 @@ use crate::mrf::{AnyLevels, BandModel, KindVisitor, Levels, LevelsVisitor, Model
 pub const MAGIC: [u8; 4] = *b"BTFM";
 /// The format version this library writes. Version 1 files (no colour space, no band
 /// marginals: linear RGB KL), version 2 files (no joint colour tables) and version 3 files (no
-/// periodic part) are still read.
-pub const VERSION: u16 = 4;
+/// periodic part) and version 4 files (one exemplar crop with a gain per subspace) are still
+/// read.
+pub const VERSION: u16 = 5;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -139,7 +140,56 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
         }
     }
     write_colour(&mut w, model);
+    write_pair_gains(&mut w, model);
     envelope::seal(MAGIC, VERSION, &w.0)
+}
+
+/// Codes per octave of a stored pair gain: a step of 2.2 %, finer than a visible brightness
+/// step.
+const GAIN_CODES_PER_OCTAVE: f64 = 32.0;
+/// The code of gain 1.
+const GAIN_CODE_ONE: f64 = 128.0;
+
+/// The byte a pair gain is stored as: `round(32 log2 g) + 128`, so gains from 1/16 to 15.7.
+fn gain_code(gain: f32) -> u8 {
+    (GAIN_CODES_PER_OCTAVE * f64::from(gain).log2() + GAIN_CODE_ONE)
+        .round()
+        .clamp(0.0, 255.0) as u8
+}
+
+/// The gain a stored byte means (see [`gain_code`]).
+fn gain_of(code: u8) -> f32 {
+    ((f64::from(code) - GAIN_CODE_ONE) / GAIN_CODES_PER_OCTAVE).exp2() as f32
+}
+
+/// Pair gains as a file stores and reads them back: what analysis keeps.
+pub fn as_stored_gains(gains: &[f32]) -> Vec<f32> {
+    gains.iter().map(|&g| gain_of(gain_code(g))).collect()
+}
+
+/// The version 5 pair gains: a flag, then a byte a pair ([`gain_code`]), view-major.
+fn write_pair_gains(w: &mut Writer, model: &MaterialModel) {
+    let gains = model.pair_gains();
+    if gains.is_empty() {
+        w.u8(0);
+        return;
+    }
+    w.u8(1);
+    for &g in gains {
+        w.u8(gain_code(g));
+    }
+}
+
+/// Reads what [`write_pair_gains`] wrote for `pairs` pairs.
+fn read_pair_gains(r: &mut Reader, pairs: usize) -> Parse<Vec<f32>> {
+    match r.u8()? {
+        0 => Ok(Vec::new()),
+        1 => {
+            r.ensure(pairs, 1, "pair gains")?;
+            (0..pairs).map(|_| Ok(gain_of(r.u8()?))).collect()
+        }
+        f => Err(format!("unknown pair gain flag {f}")),
+    }
 }
 
 /// The version 2 tail: the colour space, then the band quantile tables if any; version 3 adds
@@ -188,11 +238,7 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
             w.u8(1);
             w.u16(e.rows as u16);
             w.u16(e.cols as u16);
-            let lightness: Vec<f64> = e.lightness.iter().map(|&v| f64::from(v)).collect();
-            write_quantised(w, &lightness, Storage::Single);
-            for &g in &e.gains {
-                w.f32(f64::from(g));
-            }
+            write_principal(w, &e.lightness, Storage::Byte);
         }
     }
     write_periodic(w, model);
@@ -209,29 +255,43 @@ fn write_periodic(w: &mut Writer, model: &MaterialModel) {
     w.f32(p.lattice.cols);
     w.u8(p.rows as u8);
     w.u8(p.cols as u8);
-    w.u8((p.basis.len() - 1) as u8);
-    for period in &p.basis {
-        let values: Vec<f64> = period.iter().map(|&v| f64::from(v)).collect();
-        write_quantised(w, &values, Storage::Single);
-    }
-    for weights in &p.weights {
-        for &v in weights {
-            w.f32(f64::from(v));
-        }
-    }
+    write_principal(w, &p.periods, Storage::Single);
     if let Some(h) = &p.heights {
         let values: Vec<f64> = h.iter().map(|&v| f64::from(v)).collect();
         write_quantised(w, &values, Storage::Single);
     }
 }
 
+/// Fields stored as a mean and principal deviations: the number of deviations, each basis
+/// field quantised, then every subspace's weights.
+fn write_principal(w: &mut Writer, p: &Principal, storage: Storage) {
+    w.u8((p.basis.len() - 1) as u8);
+    for field in &p.basis {
+        let values: Vec<f64> = field.iter().map(|&v| f64::from(v)).collect();
+        write_quantised(w, &values, storage);
+    }
+    for weights in &p.weights {
+        for &v in weights {
+            w.f32(f64::from(v));
+        }
+    }
+}
+
+/// Bytes [`write_principal`] writes for `p`.
+fn principal_bytes(p: &Principal, storage: Storage) -> usize {
+    1 + p
+        .basis
+        .iter()
+        .map(|b| 8 + storage.code_bytes() * b.len())
+        .sum::<usize>()
+        + 4 * p.weights.iter().map(Vec::len).sum::<usize>()
+}
+
 /// Bytes the periodic part takes in the file (1 without one).
 pub fn periodic_bytes(model: &MaterialModel) -> usize {
     model.periodic().map_or(1, |p| {
         let heights = p.heights.as_ref().map_or(0, |_| 8 + 2 * p.rows * p.cols);
-        12 + p.basis.len() * (8 + 3 * 2 * p.rows * p.cols)
-            + 4 * p.weights.iter().map(Vec::len).sum::<usize>()
-            + heights
+        11 + principal_bytes(&p.periods, Storage::Single) + heights
     })
 }
 
@@ -250,7 +310,7 @@ pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
 pub fn exemplar_bytes(model: &MaterialModel) -> usize {
     model
         .exemplar()
-        .map_or(0, |e| 4 + 8 + 2 * e.lightness.len() + 4 * e.gains.len())
+        .map_or(0, |e| 4 + principal_bytes(&e.lightness, Storage::Byte))
 }
 
 /// Bytes the joint colour tables take in the file (0 without them).
@@ -274,16 +334,37 @@ const FLAT_RANGE: f64 = 1e-20;
 /// fixed point.
 #[derive(Clone, Copy)]
 enum Storage {
+    /// 16-bit codes, held in single precision.
     Single,
+    /// 16-bit codes, held in double precision.
     Double,
+    /// 8-bit codes, held in single precision (the exemplar's crops: a step of a few tenths of
+    /// an L* unit, below what the eye tells apart).
+    Byte,
 }
 
 impl Storage {
     /// A decoded value as the reader keeps it.
     fn held(self, v: f64) -> f64 {
         match self {
-            Storage::Single => f64::from(v as f32),
+            Storage::Single | Storage::Byte => f64::from(v as f32),
             Storage::Double => v,
+        }
+    }
+
+    /// Bytes a code takes in the file.
+    fn code_bytes(self) -> usize {
+        match self {
+            Storage::Single | Storage::Double => 2,
+            Storage::Byte => 1,
+        }
+    }
+
+    /// The largest code.
+    fn top(self) -> u16 {
+        match self {
+            Storage::Single | Storage::Double => u16::MAX,
+            Storage::Byte => u16::from(u8::MAX),
         }
     }
 
@@ -291,7 +372,7 @@ impl Storage {
     /// decoded value re-quantises to its own code: a few of the held precision's units.
     fn resolution(self) -> f64 {
         match self {
-            Storage::Single => 2f64.powi(-22),
+            Storage::Single | Storage::Byte => 2f64.powi(-22),
             Storage::Double => 2f64.powi(-36),
         }
     }
@@ -310,10 +391,11 @@ fn quantisation(min: f64, max: f64, storage: Storage) -> (f32, f32) {
     if f64::from(low) < min {
         low = low.next_up();
     }
-    let step_for = |top: f64| ((top - f64::from(low)) / 65535.0) as f32;
+    let codes = f64::from(storage.top());
+    let step_for = |top: f64| ((top - f64::from(low)) / codes) as f32;
     let mut step = step_for(max);
     for _ in 0..8 {
-        let again = step_for(storage.held(f64::from(low) + f64::from(step) * 65535.0));
+        let again = step_for(storage.held(f64::from(low) + f64::from(step) * codes));
         if again == step {
             break;
         }
@@ -340,12 +422,21 @@ fn decode(lo: f64, quantum: f64, code: u16, what: &str) -> Parse<f64> {
     }
 }
 
-/// Single-precision values (range-map heights, exemplar L*) as a file stores and reads them
+/// Single-precision values (range-map heights, periods) as a file stores and reads them
 /// back: what analysis keeps, so a model synthesizes the same before and after it is written
 /// (the quilts that enlarge them choose patches by small differences).
 pub fn as_stored(values: &[f32]) -> Vec<f32> {
+    stored_as(values, Storage::Single)
+}
+
+/// The exemplar's crops as a file stores (8-bit codes) and reads them back.
+pub fn as_stored_bytes(values: &[f32]) -> Vec<f32> {
+    stored_as(values, Storage::Byte)
+}
+
+fn stored_as(values: &[f32], storage: Storage) -> Vec<f32> {
     let wide: Vec<f64> = values.iter().map(|&v| f64::from(v)).collect();
-    let (low, step, codes) = quantised_codes(&wide, Storage::Single);
+    let (low, step, codes) = quantised_codes(&wide, storage);
     codes
         .into_iter()
         .map(|c| (f64::from(low) + f64::from(step) * f64::from(c)) as f32)
@@ -365,7 +456,7 @@ fn quantised_codes(values: &[f64], storage: Storage) -> (f32, f32, Vec<u16>) {
             if step > 0.0 {
                 ((v - f64::from(low)) / f64::from(step))
                     .round()
-                    .clamp(0.0, 65535.0) as u16
+                    .clamp(0.0, f64::from(storage.top())) as u16
             } else {
                 0
             }
@@ -374,13 +465,17 @@ fn quantised_codes(values: &[f64], storage: Storage) -> (f32, f32, Vec<u16>) {
     (low, step, codes)
 }
 
-/// Values as `f32` low, `f32` quantum and one `u16` code each (see [`quantised_codes`]).
+/// Values as `f32` low, `f32` quantum and one code each (see [`quantised_codes`]): `u8`
+/// for [`Storage::Byte`], else `u16`.
 fn write_quantised(w: &mut Writer, values: &[f64], storage: Storage) {
     let (low, step, codes) = quantised_codes(values, storage);
     w.f32(f64::from(low));
     w.f32(f64::from(step));
     for code in codes {
-        w.u16(code);
+        match storage {
+            Storage::Byte => w.u8(code as u8),
+            Storage::Single | Storage::Double => w.u16(code),
+        }
     }
 }
 
@@ -496,7 +591,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             if rows == 0 || cols == 0 || step == 0 {
                 return Err("empty range map".into());
             }
-            let heights = read_quantised(&mut r, rows * cols, "range map height")?
+            let heights = read_quantised(&mut r, rows * cols, Storage::Single, "range map height")?
                 .1
                 .into_iter()
                 .map(|h| h as f32)
@@ -529,7 +624,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     }
     let exemplar = if version >= 3 {
         read_colour_marginals(&mut r, &mut subspaces)?;
-        read_exemplar(&mut r, subspaces.len())?
+        read_exemplar(&mut r, subspaces.len(), version)?
     } else {
         None
     };
@@ -537,6 +632,11 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         read_periodic(&mut r, subspaces.len(), range_map.is_some())?
     } else {
         None
+    };
+    let pair_gains = if version >= 5 {
+        read_pair_gains(&mut r, cluster_table.len())?
+    } else {
+        Vec::new()
     };
     r.finish()?;
     MaterialModel::new(MaterialParts {
@@ -549,6 +649,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         range_map,
         exemplar,
         periodic,
+        pair_gains,
     })
     .map_err(|e| e.to_string())
 }
@@ -599,11 +700,22 @@ fn read_colour(r: &mut Reader, subspaces: &mut [SubspaceModel], levels: usize) -
 
 /// Reads `count` quantised values (see [`write_quantised`]), each within single precision:
 /// (step, values); the codes are checked to fit before anything is allocated.
-fn read_quantised(r: &mut Reader, count: usize, what: &str) -> Parse<(f64, Vec<f64>)> {
+fn read_quantised(
+    r: &mut Reader,
+    count: usize,
+    storage: Storage,
+    what: &str,
+) -> Parse<(f64, Vec<f64>)> {
     let (lo, quantum) = (r.f32()?, r.f32()?);
-    r.ensure(count, 2, what)?;
+    r.ensure(count, storage.code_bytes(), what)?;
     let values = (0..count)
-        .map(|_| decode(lo, quantum, r.u16()?, what))
+        .map(|_| {
+            let code = match storage {
+                Storage::Byte => u16::from(r.u8()?),
+                Storage::Single | Storage::Double => r.u16()?,
+            };
+            decode(lo, quantum, code, what)
+        })
         .collect::<Parse<_>>()?;
     Ok((quantum, values))
 }
@@ -611,7 +723,7 @@ fn read_quantised(r: &mut Reader, count: usize, what: &str) -> Parse<(f64, Vec<f
 /// Reads a quantised table of `count` values (see [`write_quantised`]): a step >= 0, finite,
 /// non-decreasing.
 fn read_table(r: &mut Reader, count: usize, what: &str) -> Parse<Vec<f64>> {
-    let (quantum, table) = read_quantised(r, count, what)?;
+    let (quantum, table) = read_quantised(r, count, Storage::Double, what)?;
     if quantum < 0.0 {
         return Err(format!("negative {what} step {quantum}"));
     }
@@ -646,8 +758,11 @@ fn read_colour_marginals(r: &mut Reader, subspaces: &mut [SubspaceModel]) -> Par
     Ok(())
 }
 
-/// Reads the version 3 structure exemplar (see [`write_colour`]), if any.
-fn read_exemplar(r: &mut Reader, clusters: usize) -> Parse<Option<Exemplar>> {
+/// Reads the structure exemplar (see [`write_colour`]), if any: from version 5 a mean crop,
+/// principal deviations and weights; in versions 3 and 4 one crop and a detail gain per
+/// subspace, which is the same as a zero mean, that crop as the one deviation and the gains
+/// as the weights (only the crops' detail is used).
+fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<Exemplar>> {
     match r.u8()? {
         0 => Ok(None),
         1 => {
@@ -655,21 +770,65 @@ fn read_exemplar(r: &mut Reader, clusters: usize) -> Parse<Option<Exemplar>> {
             if rows == 0 || cols == 0 {
                 return Err("empty exemplar".into());
             }
-            let (quantum, values) = read_quantised(r, rows * cols, "exemplar value")?;
-            if quantum < 0.0 {
-                return Err(format!("negative exemplar step {quantum}"));
-            }
-            let lightness = values.into_iter().map(|v| v as f32).collect();
-            let gains = r.f32s(clusters)?.into_iter().map(|g| g as f32).collect();
+            let lightness = if version >= 5 {
+                read_principal(
+                    r,
+                    rows * cols,
+                    clusters,
+                    (MAX_EXEMPLAR_COMPONENTS, Storage::Byte),
+                    "exemplar value",
+                )?
+            } else {
+                let crop = read_stored(r, rows * cols, Storage::Single, "exemplar value")?;
+                let gains = r.f32s(clusters)?;
+                Principal {
+                    basis: vec![vec![0.0; crop.len()], crop],
+                    weights: gains.into_iter().map(|g| vec![g as f32]).collect(),
+                }
+            };
             Ok(Some(Exemplar {
                 rows,
                 cols,
                 lightness,
-                gains,
             }))
         }
         f => Err(format!("unknown exemplar flag {f}")),
     }
+}
+
+/// A quantised field of `count` values (see [`write_quantised`]) with a step >= 0, held in
+/// single precision.
+fn read_stored(r: &mut Reader, count: usize, storage: Storage, what: &str) -> Parse<Vec<f32>> {
+    let (quantum, values) = read_quantised(r, count, storage, what)?;
+    if quantum < 0.0 {
+        return Err(format!("negative {what} step {quantum}"));
+    }
+    Ok(values.into_iter().map(|v| v as f32).collect())
+}
+
+/// Reads what [`write_principal`] wrote: at most `max_deviations` deviations of `len` values
+/// each, and `clusters` rows of weights.
+fn read_principal(
+    r: &mut Reader,
+    len: usize,
+    clusters: usize,
+    (max_deviations, storage): (usize, Storage),
+    what: &str,
+) -> Parse<Principal> {
+    let deviations = usize::from(r.u8()?);
+    if deviations > max_deviations {
+        return Err(format!(
+            "{deviations} principal deviations of the {what}s (at most {max_deviations})"
+        ));
+    }
+    let basis = (0..=deviations)
+        .map(|_| read_stored(r, len, storage, what))
+        .collect::<Parse<Vec<_>>>()?;
+    r.ensure(clusters, 4 * deviations, "principal weights")?;
+    let weights = (0..clusters)
+        .map(|_| Ok(r.f32s(deviations)?.into_iter().map(|v| v as f32).collect()))
+        .collect::<Parse<Vec<_>>>()?;
+    Ok(Principal { basis, weights })
 }
 
 /// Reads the version 4 periodic part (see [`write_periodic`]), if any; the range map's
@@ -692,28 +851,20 @@ fn read_periodic(
                     "periodic tile of {rows} x {cols} samples (1..={MAX_TILE_SAMPLES} each)"
                 ));
             }
-            let components = usize::from(r.u8()?);
-            if components > MAX_PERIOD_COMPONENTS {
-                return Err(format!(
-                    "{components} principal periods (at most {MAX_PERIOD_COMPONENTS})"
-                ));
-            }
-            let quantised = |r: &mut Reader, count: usize, what: &str| -> Parse<Vec<f32>> {
-                let (quantum, values) = read_quantised(r, count, what)?;
-                if quantum < 0.0 {
-                    return Err(format!("negative {what} step {quantum}"));
-                }
-                Ok(values.into_iter().map(|v| v as f32).collect())
-            };
-            let basis = (0..=components)
-                .map(|_| quantised(r, 3 * rows * cols, "periodic tile value"))
-                .collect::<Parse<Vec<_>>>()?;
-            r.ensure(clusters, 4 * components, "periodic weights")?;
-            let weights = (0..clusters)
-                .map(|_| Ok(r.f32s(components)?.into_iter().map(|v| v as f32).collect()))
-                .collect::<Parse<Vec<_>>>()?;
+            let periods = read_principal(
+                r,
+                3 * rows * cols,
+                clusters,
+                (MAX_PERIOD_COMPONENTS, Storage::Single),
+                "periodic tile value",
+            )?;
             let heights = if with_heights {
-                Some(quantised(r, rows * cols, "periodic height")?)
+                Some(read_stored(
+                    r,
+                    rows * cols,
+                    Storage::Single,
+                    "periodic height",
+                )?)
             } else {
                 None
             };
@@ -721,8 +872,7 @@ fn read_periodic(
                 lattice,
                 rows,
                 cols,
-                basis,
-                weights,
+                periods,
                 heights,
             }))
         }
@@ -811,6 +961,19 @@ mod tests {
             assert!(table.windows(2).all(|w| w[0] <= w[1]), "case {case}");
             let twice = quantised(&table, storage);
             assert_eq!(once, twice, "case {case}: offset {offset:e}, span {span:e}");
+        }
+    }
+
+    #[test]
+    fn stored_pair_gains_read_back_to_the_same_bytes() {
+        for code in 0..=255u8 {
+            assert_eq!(gain_code(gain_of(code)), code);
+        }
+        assert_eq!(gain_of(gain_code(1.0)), 1.0);
+        for g in [0.013f32, 0.3, 0.97, 1.5, 7.9, 40.0] {
+            let stored = as_stored_gains(&[g])[0];
+            let relative = (stored / g.clamp(1.0 / 16.0, 15.7)).ln().abs();
+            assert!(relative <= 0.011, "{g} -> {stored}");
         }
     }
 

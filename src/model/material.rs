@@ -135,6 +135,12 @@ pub struct MaterialParts {
     pub exemplar: Option<Exemplar>,
     /// The periodic part, if the material was found near-regular.
     pub periodic: Option<PeriodicPart>,
+    /// Per measured (view, light), view-major like the cluster table, the gain (> 0) that
+    /// brings the synthesis from its subspace image to the pair's measured mean luminance:
+    /// the images of one subspace differ in brightness, and a relief's shadows that fall
+    /// elsewhere in a synthesis than in the photograph change the mean. Empty: 1 for every
+    /// pair (files before version 5).
+    pub pair_gains: Vec<f32>,
 }
 
 /// Most samples per lattice period and axis a periodic tile keeps (larger periods are
@@ -143,6 +149,53 @@ pub const MAX_TILE_SAMPLES: usize = 32;
 
 /// Most principal deviations the subspace images' periods are stored with.
 pub const MAX_PERIOD_COMPONENTS: usize = 8;
+
+/// Fields of one length, one per subspace image, stored compactly: their mean and a few
+/// principal deviations, with each subspace's weights on the deviations (the subspace images
+/// of one surface differ mostly by light, so a few deviations hold most of their variety).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Principal {
+    /// The mean, then the principal deviations, all of one length.
+    pub basis: Vec<Vec<f32>>,
+    /// Per subspace, one weight per deviation.
+    pub weights: Vec<Vec<f32>>,
+}
+
+impl Principal {
+    /// Subspace `k`'s coefficients on the whole basis: 1 for the mean, then its weights.
+    pub fn coefficients(&self, k: usize) -> Option<Vec<f64>> {
+        let weights = self.weights.get(k)?;
+        Some(
+            std::iter::once(1.0)
+                .chain(weights.iter().map(|&w| f64::from(w)))
+                .collect(),
+        )
+    }
+
+    /// Subspace `k`'s field: the mean plus its weighted deviations.
+    pub fn combined(&self, k: usize) -> Option<Vec<f64>> {
+        let mut field = vec![0.0; self.basis.first()?.len()];
+        for (c, b) in self.coefficients(k)?.into_iter().zip(&self.basis) {
+            for (f, &v) in field.iter_mut().zip(b) {
+                *f += c * f64::from(v);
+            }
+        }
+        Some(field)
+    }
+
+    /// Whether it holds `clusters` subspaces' weights and 1 to `1 + max_deviations` basis
+    /// fields of `len` values, every value finite.
+    fn fits(&self, len: usize, clusters: usize, max_deviations: usize) -> bool {
+        let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+        (1..=1 + max_deviations).contains(&self.basis.len())
+            && self.basis.iter().all(|b| b.len() == len && finite(b))
+            && self.weights.len() == clusters
+            && self
+                .weights
+                .iter()
+                .all(|w| w.len() == self.basis.len() - 1 && finite(w))
+    }
+}
 
 /// The periodic part of a near-regular material (issue 11; Haindl and Hatka's near-regular
 /// textures): per subspace image the mean over its lattice periods, in linear RGB, whose
@@ -159,12 +212,10 @@ pub struct PeriodicPart {
     pub rows: usize,
     /// Samples per period along columns (1..=[`MAX_TILE_SAMPLES`]).
     pub cols: usize,
-    /// The mean period, then up to [`MAX_PERIOD_COMPONENTS`] principal deviations: `3 * rows *
-    /// cols` finite values each, natural logarithms of linear RGB (a light's gain is a shift
+    /// The periods: their mean and up to [`MAX_PERIOD_COMPONENTS`] principal deviations, `3 *
+    /// rows * cols` values each, natural logarithms of linear RGB (a light's gain is a shift
     /// there, and every period stays positive), channel-major then row-major.
-    pub basis: Vec<Vec<f32>>,
-    /// Per subspace, one finite weight per principal deviation.
-    pub weights: Vec<Vec<f32>>,
+    pub periods: Principal,
     /// The range map's heights over one period (texels of the measured image), `rows * cols`
     /// values, exactly when the model has a range map.
     pub heights: Option<Vec<f32>>,
@@ -174,14 +225,7 @@ impl PeriodicPart {
     /// Subspace `k`'s period as (3, rows, cols), linear RGB: the exponential of the mean plus
     /// its weighted deviations (stored as logarithms).
     pub fn tile(&self, k: usize) -> Option<Array3<f64>> {
-        let weights = self.weights.get(k)?;
-        let (mean, deviations) = self.basis.split_first()?;
-        let mut tile: Vec<f64> = mean.iter().map(|&v| f64::from(v)).collect();
-        for (w, d) in weights.iter().zip(deviations) {
-            for (t, &v) in tile.iter_mut().zip(d) {
-                *t += f64::from(*w) * f64::from(v);
-            }
-        }
+        let tile = self.periods.combined(k)?;
         Array3::from_shape_vec((3, self.rows, self.cols), tile)
             .ok()
             .map(|t| t.mapv(f64::exp))
@@ -196,31 +240,42 @@ impl PeriodicPart {
     }
 }
 
+/// Most principal deviations the subspace images' exemplar crops are stored with.
+pub const MAX_EXEMPLAR_COMPONENTS: usize = 8;
+
 /// A compact exemplar of the material's structure (issue 11: a photograph has no range map to
-/// carry it): the CIE L* of a crop of one subspace image, at the measured pixel scale. At
-/// synthesis it is quilted ([`crate::geometry::quilt`]) to the output size, and its detail
-/// finer than a patch replaces the MRF's in every subspace image's L*, scaled by that
-/// subspace's `gains[k]` (its own detail contrast over the exemplar's); the MRF keeps the
-/// coarser variation, so the result repeats on no grid. One exemplar for all subspaces keeps
-/// the structure the same surface under every light.
+/// carry it): the CIE L* of the same crop of every subspace image, at the measured pixel
+/// scale, stored as their mean and a few principal deviations. At synthesis the crops are
+/// quilted ([`crate::geometry::quilt`]) to the output size, every one with the same patches,
+/// and subspace `k`'s detail finer than a patch replaces the MRF's in its L*; the MRF keeps
+/// the coarser variation, so the result repeats on no grid. One layout for all subspaces keeps
+/// the structure the same surface under every light, and each subspace keeps its own detail
+/// (the shading of a relief, its shadows and highlights, differ from light to light).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Exemplar {
     /// Rows of the crop.
     pub rows: usize,
     /// Columns of the crop.
     pub cols: usize,
-    /// L*, row-major, `rows * cols` values.
-    pub lightness: Vec<f32>,
-    /// Detail contrast of each subspace image over the exemplar's, one per subspace.
-    pub gains: Vec<f32>,
+    /// The crops' L*: mean and up to [`MAX_EXEMPLAR_COMPONENTS`] principal deviations,
+    /// `rows * cols` values each, row-major.
+    pub lightness: Principal,
 }
 
 impl Exemplar {
-    /// The crop as a plane.
-    pub fn samples(&self) -> Array2<f64> {
-        Array2::from_shape_fn((self.rows, self.cols), |(r, c)| {
-            f64::from(self.lightness[r * self.cols + c])
-        })
+    /// Basis field `j` (0: the mean crop, then the deviations) as a (rows, cols) plane.
+    pub fn plane(&self, j: usize) -> Option<Array2<f64>> {
+        let b = self.lightness.basis.get(j)?;
+        Array2::from_shape_vec(
+            (self.rows, self.cols),
+            b.iter().map(|&v| f64::from(v)).collect(),
+        )
+        .ok()
+    }
+
+    /// Subspace `k`'s crop as a (rows, cols) plane.
+    pub fn crop(&self, k: usize) -> Option<Array2<f64>> {
+        Array2::from_shape_vec((self.rows, self.cols), self.lightness.combined(k)?).ok()
     }
 }
 
@@ -327,17 +382,17 @@ impl MaterialModel {
                 || e.cols == 0
                 || e.rows > MAX_COUNT
                 || e.cols > MAX_COUNT
-                || e.lightness.len() != e.rows * e.cols
-                || e.gains.len() != clusters
-                || e.lightness.iter().any(|v| !v.is_finite())
-                || e.gains.iter().any(|g| !(g.is_finite() && *g >= 0.0)))
+                || !e
+                    .lightness
+                    .fits(e.rows * e.cols, clusters, MAX_EXEMPLAR_COMPONENTS))
         {
             return bad(format!(
-                "exemplar of {} values as {}x{} with {} gains for {clusters} subspaces (all finite, gains >= 0)",
-                e.lightness.len(),
+                "exemplar of {} x {} samples with {} basis crops (1..={}, rows x cols finite values each) and {} weight rows for {clusters} subspaces",
                 e.rows,
                 e.cols,
-                e.gains.len()
+                e.lightness.basis.len(),
+                1 + MAX_EXEMPLAR_COMPONENTS,
+                e.lightness.weights.len()
             ));
         }
         if let Some(p) = &parts.periodic {
@@ -349,12 +404,7 @@ impl MaterialModel {
                 && period_ok(p.lattice.cols)
                 && samples.contains(&p.rows)
                 && samples.contains(&p.cols)
-                && (1..=1 + MAX_PERIOD_COMPONENTS).contains(&p.basis.len())
-                && p.basis.iter().all(|b| b.len() == values && finite(b))
-                && p.weights.len() == clusters
-                && p.weights
-                    .iter()
-                    .all(|w| w.len() == p.basis.len() - 1 && finite(w))
+                && p.periods.fits(values, clusters, MAX_PERIOD_COMPONENTS)
                 && p.heights.is_some() == parts.range_map.is_some()
                 && p.heights
                     .as_ref()
@@ -366,13 +416,25 @@ impl MaterialModel {
                     p.lattice.cols,
                     p.rows,
                     p.cols,
-                    p.basis.len(),
+                    p.periods.basis.len(),
                     1 + MAX_PERIOD_COMPONENTS,
-                    p.weights.len(),
+                    p.periods.weights.len(),
                     p.heights.is_some(),
                     parts.range_map.is_some()
                 ));
             }
+        }
+        if !parts.pair_gains.is_empty()
+            && (parts.pair_gains.len() != nv * nl
+                || parts
+                    .pair_gains
+                    .iter()
+                    .any(|g| !(g.is_finite() && *g > 0.0)))
+        {
+            return bad(format!(
+                "{} pair gains for {nv} x {nl} pairs (all finite and positive)",
+                parts.pair_gains.len()
+            ));
         }
         if let Some(r) = &parts.range_map {
             let sides = [r.rows, r.cols, r.step];
@@ -429,6 +491,21 @@ impl MaterialModel {
     /// Cluster of every measured (view, light), view-major; each entry names a subspace.
     pub fn cluster_table(&self) -> &[u16] {
         &self.parts.cluster_table
+    }
+
+    /// The gain of measured pair (`view`, `light`) (see [`MaterialParts::pair_gains`]); 1 for
+    /// a model without gains or a pair outside the sets.
+    pub fn pair_gain(&self, view: usize, light: usize) -> f64 {
+        let index = view * self.parts.lights.len() + light;
+        self.parts
+            .pair_gains
+            .get(index)
+            .map_or(1.0, |&g| f64::from(g))
+    }
+
+    /// Every pair's gain, view-major (empty: 1 for every pair).
+    pub fn pair_gains(&self) -> &[f32] {
+        &self.parts.pair_gains
     }
 
     /// One model per cluster (at least one).
@@ -525,6 +602,7 @@ mod tests {
             range_map: None,
             exemplar: None,
             periodic: None,
+            pair_gains: Vec::new(),
         }
     }
 
@@ -559,6 +637,18 @@ mod tests {
         assert!(e.contains("names cluster 2 of 2"), "{e}");
         let e = refused(|p| p.cluster_table.truncate(5));
         assert!(e.contains("5 cluster table entries for 2 x 3"), "{e}");
+        let e = refused(|p| p.pair_gains = vec![1.0; 5]);
+        assert!(e.contains("5 pair gains for 2 x 3 pairs"), "{e}");
+        let e = refused(|p| p.pair_gains = vec![1.0, 0.0, 1.0, 1.0, 1.0, 1.0]);
+        assert!(e.contains("6 pair gains"), "{e}");
+        let gained = MaterialModel::new(MaterialParts {
+            pair_gains: vec![1.0, 2.0, 1.0, 1.0, 1.0, 0.5],
+            ..parts()
+        })
+        .unwrap();
+        assert_eq!(gained.pair_gain(0, 1), 2.0);
+        assert_eq!(gained.pair_gain(1, 2), 0.5);
+        assert_eq!(MaterialModel::new(parts()).unwrap().pair_gain(0, 1), 1.0);
         let e = refused(|p| p.subspaces[1] = flat(2, GmrfModel::constant(0.5)));
         assert!(e.contains("subspace 1 has 2 gmrf levels"), "{e}");
         let e = refused(|p| p.subspaces[1] = flat(3, Car2dModel::constant(0.5)));
@@ -596,11 +686,40 @@ mod tests {
             p.exemplar = Some(Exemplar {
                 rows: 2,
                 cols: 2,
-                lightness: vec![50.0; 4],
-                gains: vec![1.0],
+                lightness: Principal {
+                    basis: vec![vec![50.0; 4]],
+                    weights: vec![vec![]],
+                },
             })
         });
-        assert!(e.contains("with 1 gains for 2 subspaces"), "{e}");
+        assert!(e.contains("1 weight rows for 2 subspaces"), "{e}");
+        // Two subspaces on a mean crop and one deviation: each rebuilds its own crop.
+        let exemplar = Exemplar {
+            rows: 2,
+            cols: 2,
+            lightness: Principal {
+                basis: vec![vec![50.0; 4], vec![1.0, -1.0, 2.0, 0.0]],
+                weights: vec![vec![0.0], vec![3.0]],
+            },
+        };
+        let model = MaterialModel::new(MaterialParts {
+            exemplar: Some(exemplar.clone()),
+            ..parts()
+        })
+        .unwrap();
+        let e = model.exemplar().unwrap();
+        assert_eq!(e.crop(0).unwrap(), Array2::from_elem((2, 2), 50.0));
+        assert_eq!(
+            e.crop(1).unwrap().into_raw_vec_and_offset().0,
+            vec![53.0, 47.0, 56.0, 50.0]
+        );
+        assert!(e.crop(2).is_none());
+        let e = refused(|p| {
+            let mut broken = exemplar.clone();
+            broken.lightness.basis[1][2] = f32::NAN;
+            p.exemplar = Some(broken);
+        });
+        assert!(e.contains("exemplar of 2 x 2 samples"), "{e}");
         let periodic = PeriodicPart {
             lattice: Lattice {
                 rows: 8.0,
@@ -608,8 +727,10 @@ mod tests {
             },
             rows: 2,
             cols: 3,
-            basis: vec![vec![0.5; 18], vec![0.1; 18]],
-            weights: vec![vec![1.0], vec![-6.0]],
+            periods: Principal {
+                basis: vec![vec![0.5; 18], vec![0.1; 18]],
+                weights: vec![vec![1.0], vec![-6.0]],
+            },
             heights: None,
         };
         let model = MaterialModel::new(MaterialParts {
@@ -634,15 +755,24 @@ mod tests {
         assert!(p.tile(2).is_none());
         for broken in [
             PeriodicPart {
-                weights: vec![vec![1.0]],
+                periods: Principal {
+                    weights: vec![vec![1.0]],
+                    ..periodic.periods.clone()
+                },
                 ..periodic.clone()
             },
             PeriodicPart {
-                weights: vec![vec![1.0], vec![f32::NAN]],
+                periods: Principal {
+                    weights: vec![vec![1.0], vec![f32::NAN]],
+                    ..periodic.periods.clone()
+                },
                 ..periodic.clone()
             },
             PeriodicPart {
-                basis: vec![vec![0.5; 18], vec![0.1; 17]],
+                periods: Principal {
+                    basis: vec![vec![0.5; 18], vec![0.1; 17]],
+                    ..periodic.periods.clone()
+                },
                 ..periodic.clone()
             },
             PeriodicPart {

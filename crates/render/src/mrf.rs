@@ -44,6 +44,8 @@ pub struct MaterialTables {
     pub clusters: Vec<usize>,
     /// Per (view * lights + light), the texture layer of its cluster or `u32::MAX`.
     pub pair_layer: Vec<u32>,
+    /// Per (view * lights + light), the pair's gain ([`MaterialModel::pair_gain`]).
+    pub pair_gain: Vec<f32>,
     /// Measured views and lights.
     pub counts: (usize, usize),
     /// Direction tables of the views and of the lights.
@@ -89,11 +91,15 @@ impl MaterialTables {
             .iter()
             .map(|&c| layer_of[usize::from(c)])
             .collect();
+        let pair_gain = (0..nv * nl)
+            .map(|i| model.pair_gain(i / nl, i % nl) as f32)
+            .collect();
         Ok(Self {
             size: cache.options().rows,
             tile: cache.options().rows,
             clusters,
             pair_layer,
+            pair_gain,
             counts: (nv, nl),
             view_lut,
             light_lut,
@@ -271,6 +277,7 @@ impl GpuMaterial {
         let common = CommonBuffers::new(ctx, (&tables.view_lut, &tables.light_lut))?;
         let pair_layer =
             storage_buffer(ctx, "pair layers", bytemuck::cast_slice(&tables.pair_layer))?;
+        let pair_gain = storage_buffer(ctx, "pair gains", bytemuck::cast_slice(&tables.pair_gain))?;
         let ones = vec![1.0f32; super::lut::SHADING_GRID * super::lut::SHADING_GRID];
         let shading = tables.mean_shading.as_ref().map_or(&ones, |m| &m.values);
         let mean_shade = storage_buffer(ctx, "mean shading", bytemuck::cast_slice(shading))?;
@@ -318,6 +325,10 @@ impl GpuMaterial {
             wgpu::BindGroupEntry {
                 binding: 10,
                 resource: light_strength.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 11,
+                resource: pair_gain.as_entire_binding(),
             },
         ]);
         let bind_group = ctx.checked("material bind group", || {
@@ -386,6 +397,7 @@ impl MrfPass {
             storage_entry(8),
             storage_entry(9),
             storage_entry(10),
+            storage_entry(11),
         ]);
         let layout = bind_group_layout(ctx, "mrf material", &entries);
         let pipeline = |mapping: Mapping| {

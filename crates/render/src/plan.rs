@@ -194,6 +194,7 @@ mod tests {
             range_map: None,
             exemplar: None,
             periodic: None,
+            pair_gains: Vec::new(),
         })
         .unwrap()
     }
