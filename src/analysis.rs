@@ -30,9 +30,11 @@ pub struct AnalysisOptions {
     /// Number of subspace images c. Default: 20 (the survey's choice).
     pub clusters: usize,
     /// Weight of the measured light and view directions beside the colour histograms in the
-    /// clustering (see [`ClusterOptions::direction_share`]; 0: histograms alone). Default:
-    /// [`crate::decompose::cluster::DIRECTION_SHARE`].
-    pub direction_share: f64,
+    /// clustering (see [`ClusterOptions::direction_share`]; 0: histograms alone). `None`:
+    /// [`crate::decompose::cluster::DIRECTION_SHARE`] for a BTF of several views, 0 for a
+    /// one-view capture (an RTI dome), whose histograms already follow the light's elevation
+    /// and where the directions measured slightly worse. Default: `None`.
+    pub direction_share: Option<f64>,
     /// Pyramid levels; `None` picks as many as keep the coarsest band at least 16 pixels a
     /// side, at most 4.
     pub levels: Option<usize>,
@@ -79,7 +81,7 @@ impl Default for AnalysisOptions {
         Self {
             kind: ModelKind::Car2d,
             clusters: 20,
-            direction_share: crate::decompose::cluster::DIRECTION_SHARE,
+            direction_share: None,
             levels: None,
             max_order: MAX_ORDER,
             seed: 1,
@@ -160,10 +162,15 @@ pub fn analyze(
     options: &AnalysisOptions,
     progress: &dyn Progress,
 ) -> Result<(MaterialModel, AnalysisReport)> {
-    if !(0.0..=100.0).contains(&options.direction_share) {
+    let direction_share = options.direction_share.unwrap_or(if btf.views().len() > 1 {
+        crate::decompose::cluster::DIRECTION_SHARE
+    } else {
+        0.0
+    });
+    if !(0.0..=100.0).contains(&direction_share) {
         return Err(ModelError::parameter(
             "--direction-share",
-            format!("{} is outside 0..=100", options.direction_share),
+            format!("{direction_share} is outside 0..=100"),
         ));
     }
     if options.clusters == 0 || options.clusters > 4096 {
@@ -228,7 +235,7 @@ pub fn analyze(
         &ClusterOptions {
             clusters: options.clusters,
             seed: options.seed,
-            direction_share: options.direction_share,
+            direction_share,
             preferred: match (&range_map, &registered) {
                 (Some(map), Some(heights)) => deshadable(btf, frontal, map, heights),
                 _ => Vec::new(),
@@ -364,13 +371,18 @@ pub fn analyze(
     // chromaticities gives way to its cluster's nearest member: dividing a grazing light's
     // shading out can leave a texture whose independent colour factors combine into specks
     // of a colour the material never shows (the leather at 75 degrees).
-    let unfit = off_chroma_subspaces(btf, &clustering, &fitted, periodic.as_ref())?;
+    let unfit = off_chroma_subspaces(
+        btf,
+        &clustering,
+        &fitted,
+        (range_map.as_ref(), periodic.as_ref()),
+    )?;
     let refitted = unfit
         .par_iter()
-        .map(|&k| fit(k, clustering.nearest[k]))
+        .map(|&k| fit(k, clustering.fallbacks[k]))
         .collect::<Result<Vec<_>>>()?;
     for (k, f) in unfit.into_iter().zip(refitted) {
-        clustering.representatives[k] = clustering.nearest[k];
+        clustering.representatives[k] = clustering.fallbacks[k];
         fitted[k] = f;
     }
     let mut subspaces = Vec::with_capacity(fitted.len());
@@ -452,18 +464,19 @@ type Fitted = (SubspaceModel, Vec<AnalysisRepair>, f64, Option<Array2<f64>>);
 /// texture do not need more).
 const CHECK_SIDE: usize = 256;
 
-/// The subspaces whose representative is a preferred image (not the cluster's nearest
-/// member) and whose synthesis (seed 1, at most [`CHECK_SIDE`] a side) has more pixels
-/// outside the chromaticities of the representative's view than the artefact sweep allows
+/// The subspaces whose representative is a preferred image with a fallback (a member not
+/// preferred) and whose synthesis (seed 1, at most [`CHECK_SIDE`] a side), relit for any of the
+/// cluster's members in the representative's view, has more pixels outside the
+/// chromaticities of that view than the artefact sweep allows
 /// ([`crate::eval::artefacts::Detector::Chroma`]).
 fn off_chroma_subspaces(
     btf: &Btf,
     clustering: &SubspaceClustering,
     fitted: &[Fitted],
-    periodic: Option<&PeriodicPart>,
+    (range_map, periodic): (Option<&RangeMap>, Option<&PeriodicPart>),
 ) -> Result<Vec<usize>> {
     let preferred: Vec<usize> = (0..fitted.len())
-        .filter(|&k| clustering.representatives[k] != clustering.nearest[k])
+        .filter(|&k| clustering.representatives[k] != clustering.fallbacks[k])
         .collect();
     let Some(&first) = preferred.first() else {
         return Ok(Vec::new());
@@ -481,12 +494,15 @@ fn off_chroma_subspaces(
         height: btf.height(),
         cluster_table: clustering.labels.clone(),
         subspaces: fitted.iter().map(|f| f.0.clone()).collect(),
-        range_map: None,
-        exemplar: None,
-        // Without a range map the period's heights go too; the colour period stays.
-        periodic: periodic
-            .cloned()
-            .map(|p| PeriodicPart { heights: None, ..p }),
+        range_map: range_map.cloned(),
+        // The exemplar as it would be stored (its L* detail moves pixels' chromaticity too).
+        exemplar: exemplar_from(
+            &fitted
+                .iter()
+                .filter_map(|f| f.3.clone())
+                .collect::<Vec<_>>(),
+        ),
+        periodic: periodic.cloned(),
         pair_gains: Vec::new(),
     })?;
     let o = crate::synthesis::SynthesisOptions {
@@ -495,16 +511,31 @@ fn off_chroma_subspaces(
         seed: 1,
         tileable: false,
     };
-    let shares = preferred
+    let cache = probe.synthesis_cache(&o)?;
+    let Some(v) = btf.views().get(view) else {
+        return Ok(Vec::new());
+    };
+    // Every light of the representatives' view whose subspace has a preferred representative.
+    let checked: Vec<(usize, usize)> = (0..btf.lights().len())
+        .map(|l| (l, clustering.cluster_of(view, l)))
+        .filter(|(_, k)| preferred.contains(k))
+        .collect();
+    let shares = checked
         .par_iter()
-        .map(|&k| Ok(support.outliers(&probe.synthesize_subspace(k, &o)?)))
+        .map(|&(l, _)| match btf.lights().get(l) {
+            Some(light) => Ok(support.outliers(&probe.image_from_cache(&cache, v, light)?)),
+            None => Ok(0.0),
+        })
         .collect::<Result<Vec<f64>>>()?;
-    Ok(preferred
+    let mut unfit: Vec<usize> = checked
         .into_iter()
         .zip(shares)
         .filter(|&(_, share)| share > limit)
-        .map(|(k, _)| k)
-        .collect())
+        .map(|((_, k), _)| k)
+        .collect();
+    unfit.sort_unstable();
+    unfit.dedup();
+    Ok(unfit)
 }
 
 /// Which images (view-major) make the better subspace representatives: those of the view the

@@ -305,10 +305,11 @@ mod mrf_cases {
         ]);
         // On histograms alone two distinct images make two subspaces; with the directions
         // every image (each under its own light) may have its own, and no more.
-        for (share, subspaces) in [(0.0, 2), (AnalysisOptions::default().direction_share, 5)] {
+        let share = btfmrf::decompose::cluster::DIRECTION_SHARE;
+        for (share, subspaces) in [(0.0, 2), (share, 5)] {
             let options = AnalysisOptions {
                 clusters: 20,
-                direction_share: share,
+                direction_share: Some(share),
                 ..AnalysisOptions::default()
             };
             let (model, _) = analyze(&btf, &options, &NoProgress).unwrap();

@@ -260,9 +260,10 @@ pub struct SubspaceClustering {
     pub labels: Vec<u16>,
     /// The (view, light) of each cluster's representative image.
     pub representatives: Vec<(usize, usize)>,
-    /// The (view, light) of each cluster's member nearest its centre whether preferred or
-    /// not: the representative to fall back on when a preferred one proves unfit.
-    pub nearest: Vec<(usize, usize)>,
+    /// The (view, light) of each cluster's member nearest its centre among those not
+    /// preferred (the representative when there is none): the representative to fall back on
+    /// when a preferred one proves unfit.
+    pub fallbacks: Vec<(usize, usize)>,
     /// Mean linear luminance of every image, view-major.
     pub luminance: Vec<f64>,
 }
@@ -313,11 +314,14 @@ impl SubspaceClustering {
             options.restarts,
             options.max_iterations,
         );
-        let nearest = |c: usize, preferred_only: bool| {
+        // The member of cluster `c` nearest its centre among the preferred images (`Some(true)`),
+        // the others (`Some(false)`) or all (`None`).
+        let nearest = |c: usize, preferred: Option<bool>| {
             (0..total)
                 .filter(|&i| {
                     km.labels[i] == c
-                        && (!preferred_only || options.preferred.get(i).copied().unwrap_or(false))
+                        && preferred
+                            .is_none_or(|p| options.preferred.get(i).copied().unwrap_or(false) == p)
                 })
                 .min_by(|&a, &b| {
                     dist2(&features[a], &km.centres[c])
@@ -326,19 +330,21 @@ impl SubspaceClustering {
                 })
         };
         let pair = |i: usize| (i / lights, i % lights);
-        let closest: Vec<usize> = (0..km.centres.len())
-            .map(|c| nearest(c, false).expect("no cluster is empty after k-means"))
-            .collect();
-        let representatives = closest
-            .iter()
-            .enumerate()
-            .map(|(c, &any)| pair(nearest(c, true).unwrap_or(any)))
-            .collect();
+        let (representatives, fallbacks) = (0..km.centres.len())
+            .map(|c| {
+                let any = nearest(c, None).expect("no cluster is empty after k-means");
+                let chosen = nearest(c, Some(true)).unwrap_or(any);
+                (
+                    pair(chosen),
+                    pair(nearest(c, Some(false)).unwrap_or(chosen)),
+                )
+            })
+            .unzip();
         Ok(Self {
             lights,
             labels: km.labels.iter().map(|&l| l as u16).collect(),
             representatives,
-            nearest: closest.into_iter().map(pair).collect(),
+            fallbacks,
             luminance,
         })
     }

@@ -70,9 +70,11 @@ pub struct Args {
     /// elevation in one subspace image, though the relief's shading and shadows fall another
     /// way under each; with the directions each subspace image stays with neighbouring
     /// lights (on the built-in materials the texture judge's structure distance fell by 14-24
-    /// %).
-    #[arg(long, default_value_t = btfmrf::decompose::cluster::DIRECTION_SHARE)]
-    direction_share: f64,
+    /// %). Default: 0.5 for a BTF of several views, 0 for a one-view capture (an RTI dome),
+    /// where the histograms already follow the light's elevation and the directions measured
+    /// slightly worse.
+    #[arg(long)]
+    direction_share: Option<f64>,
     /// Pyramid levels (default: as many as keep the coarsest band >= 16 px, at most 4).
     #[arg(long)]
     levels: Option<usize>,
