@@ -113,7 +113,25 @@ pub fn quilt_laid(
         companions.iter().all(|c| c.dim() == source.dim()),
         "registered companions"
     );
-    let (heights, _, laid) = quilt_patches(source, companions, rows, cols, seed);
+    // A companion equal to the source (a photograph's one exemplar crop is its own guide) is
+    // the source's quilt: no second integration.
+    let other: Vec<Array2<f64>> = companions
+        .iter()
+        .filter(|&c| c != source)
+        .cloned()
+        .collect();
+    let (heights, _, laid) = quilt_patches(source, &other, rows, cols, seed);
+    let mut laid = laid.into_iter();
+    let laid = companions
+        .iter()
+        .map(|c| {
+            if c == source {
+                heights.clone()
+            } else {
+                laid.next().expect("one quilt per other companion")
+            }
+        })
+        .collect();
     (heights, laid)
 }
 
@@ -554,6 +572,9 @@ mod tests {
         // differs, this one follows the source's layout.
         assert_ne!(laid[1], quilt(&other, 150, 130, 4));
         assert_eq!(laid[1].dim(), (150, 130));
+        // The source as its own companion is its quilt.
+        let (_, own) = quilt_laid(&source, std::slice::from_ref(&source), 150, 130, 4);
+        assert_eq!(own[0], alone);
         // Linear up to the mean: a weighted sum's quilt is the weighted sum of the quilts.
         let summed = &laid[1] * 0.5 - &laid[0] * 2.0;
         let shift = laid[2].mean().unwrap() - summed.mean().unwrap();
