@@ -1,6 +1,6 @@
 //! Speed of the MRF model: analysis of a generated 81 x 81 BTF at 128 x 128, synthesis of one
-//! 1024 x 1024 BTF image (plain and tileable) and of all subspace images, and the band
-//! synthesizers alone.
+//! 1024 x 1024 BTF image (plain and tileable) and of all subspace images, one 1024 x 1024
+//! enlargement of a photograph, and the band synthesizers alone.
 //!
 //! Run: `cargo bench --bench model` (medians in target/criterion/). Targets from the MRF issue:
 //! analysis under 10 s, one 1024^2 image in 25 ms, all 20 subspaces at 1024^2 under 1 s.
@@ -105,6 +105,41 @@ fn bench_synthesis(c: &mut Criterion) {
     group.finish();
 }
 
+/// One 1024 x 1024 enlargement of a photograph (gravel.png, 2D CAR) with the structure
+/// exemplar (the default: its quilt) and without it.
+fn bench_photograph(c: &mut Criterion) {
+    let mut group = c.benchmark_group("photograph_1024");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(20));
+    allocator::keep_freed_memory();
+    let btf = Btf::open("../shared/data/textures/gravel.png").expect("the shared photograph");
+    let o = SynthesisOptions {
+        rows: 1024,
+        cols: 1024,
+        seed: 1,
+        tileable: false,
+    };
+    let zenith = Direction::new(0.0, 0.0);
+    for (name, exemplar_side) in [("exemplar", None), ("mrf_only", Some(0))] {
+        let options = AnalysisOptions {
+            exemplar_side,
+            ..AnalysisOptions::default()
+        };
+        let model = analyze(&btf, &options, &NoProgress).expect("analysis").0;
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                black_box(
+                    model
+                        .synthesize_image(&zenith, &zenith, &o)
+                        .expect("synthesis"),
+                )
+            })
+        });
+    }
+    group.finish();
+}
+
 fn bench_bands(c: &mut Criterion) {
     let mut group = c.benchmark_group("band");
     group.sample_size(10);
@@ -131,5 +166,11 @@ fn bench_bands(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_analysis, bench_synthesis, bench_bands);
+criterion_group!(
+    benches,
+    bench_analysis,
+    bench_synthesis,
+    bench_photograph,
+    bench_bands
+);
 criterion_main!(benches);

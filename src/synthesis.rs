@@ -10,7 +10,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, Mutex, OnceLock};
 
-use ndarray::{Array2, Array3, Axis};
+use ndarray::{Array2, Array3, Axis, s};
 use rayon::prelude::*;
 
 use crate::btf::{Direction, Weighted};
@@ -19,7 +19,9 @@ use crate::decompose::{Border, ColourSpace, Pyramid};
 use crate::geometry::integrate::{Edges, normals_of_periodic};
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::relight::{SHADING_FLOOR, shading_factor};
-use crate::geometry::{detail_scale, quilt, quilt_laid, resample_periodic, split_detail};
+use crate::geometry::{
+    detail_scale, patch_side, quilt, quilt_laid, resample_periodic, split_detail,
+};
 use crate::model::{Exemplar, MaterialModel, ModelError, PeriodicPart, Result};
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
@@ -546,13 +548,14 @@ impl MaterialModel {
             return Some(lattice::tiled(&period, &output_lattice(p, o), rows, cols));
         }
         let side = |n: usize| ((n as f64 / map.step as f64).round() as usize).max(1);
+        let (tr, tc) = quilt_torus(o, patch_side(map.rows, map.cols) * map.step);
         let torus = quilt(
             &map.samples(),
-            side(rows),
-            side(cols),
+            side(tr),
+            side(tc),
             crate::mrf::noise::mix(seed, RANGE_SEED),
         );
-        Some(resample_periodic(&torus, rows.max(1), cols.max(1)))
+        Some(cropped(resample_periodic(&torus, tr, tc), rows, cols))
     }
 
     /// The exemplar's basis crops quilted onto the output torus with one layout (chosen on the
@@ -564,14 +567,20 @@ impl MaterialModel {
             return Some(details);
         }
         let e = self.exemplar()?;
+        let (tr, tc) = quilt_torus(o, patch_side(e.rows, e.cols));
         let (_, details) = quilt_laid(
             &e.crop(0)?,
             &exemplar_planes(e),
-            o.rows.max(1),
-            o.cols.max(1),
+            tr,
+            tc,
             crate::mrf::noise::mix(o.seed, EXEMPLAR_SEED),
         );
-        Some(zero_mean(details))
+        Some(zero_mean(
+            details
+                .into_iter()
+                .map(|d| cropped(d, o.rows, o.cols))
+                .collect(),
+        ))
     }
 
     /// The range map's heights ([`MaterialModel::range_heights`], the same values) and the
@@ -584,14 +593,13 @@ impl MaterialModel {
             return None;
         }
         let seed = crate::mrf::noise::mix(o.seed, RANGE_SEED);
-        let (heights, details) = quilt_laid(
-            &map.samples(),
-            &exemplar_planes(e),
-            o.rows.max(1),
-            o.cols.max(1),
-            seed,
-        );
-        Some((heights, zero_mean(details)))
+        let (tr, tc) = quilt_torus(o, patch_side(e.rows, e.cols));
+        let (heights, details) = quilt_laid(&map.samples(), &exemplar_planes(e), tr, tc, seed);
+        let details = details
+            .into_iter()
+            .map(|d| cropped(d, o.rows, o.cols))
+            .collect();
+        Some((cropped(heights, o.rows, o.cols), zero_mean(details)))
     }
 
     /// The bump strength for `light`: the measured lights' fitted strengths
@@ -620,6 +628,27 @@ fn output_lattice(p: &PeriodicPart, o: &SynthesisOptions) -> Lattice {
         rows: lattice::output_period(p.lattice.rows, o.rows, o.tileable),
         cols: lattice::output_period(p.lattice.cols, o.cols, o.tileable),
     }
+}
+
+/// The torus (rows, cols) a quilt is laid on for an output of `o`: the output itself when it
+/// must tile; else `margin` texels (a patch) larger each way, so that the wrap-around joins,
+/// where the last patches must fit the first ones again and their seams show (measured: a
+/// straight line of broken mortar across a 512^2 brick wall), fall outside the output.
+fn quilt_torus(o: &SynthesisOptions, margin: usize) -> (usize, usize) {
+    let grown = |n: usize| if o.tileable { n } else { n + margin }.max(1);
+    (grown(o.rows), grown(o.cols))
+}
+
+/// The top-left `rows` x `cols` of `field` (at least one sample each way).
+fn cropped(field: Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
+    let (r, c) = (
+        rows.max(1).min(field.nrows()),
+        cols.max(1).min(field.ncols()),
+    );
+    if (r, c) == field.dim() {
+        return field;
+    }
+    field.slice(s![..r, ..c]).to_owned()
 }
 
 /// Mixed into the synthesis seed for the range map's quilt (the bands use their own indices).

@@ -316,7 +316,7 @@ fn every_model_on_every_photograph_is_judged() {
         // With the structure exemplar (the default for a photograph) and without it.
         for (kind, exemplar_side) in ModelKind::ALL
             .into_iter()
-            .flat_map(|k| [(k, btfmrf::analysis::EXEMPLAR_SIDE), (k, 0)])
+            .flat_map(|k| [(k, None), (k, Some(0))])
         {
             let options = AnalysisOptions {
                 kind,
@@ -334,7 +334,7 @@ fn every_model_on_every_photograph_is_judged() {
                 .judge(&model.synthesize_image(&zenith, &zenith, &o).unwrap())
                 .unwrap();
             println!(
-                "{name} {kind} exemplar {exemplar_side}: {} bytes, structure {:.4} (x{:.2} crop, x{:.2} random phase), colour {:.2} Lab",
+                "{name} {kind} exemplar {exemplar_side:?}: {} bytes, structure {:.4} (x{:.2} crop, x{:.2} random phase), colour {:.2} Lab",
                 btfmrf::model::format::to_bytes(&model).len(),
                 f.judgement.structure,
                 f.structure_vs_crop,

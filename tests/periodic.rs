@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use btfmrf::analysis::{AnalysisOptions, EXEMPLAR_SIDE, analyze};
+use btfmrf::analysis::{AnalysisOptions, analyze};
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction};
 use btfmrf::eval::artefacts::seam;
@@ -23,7 +23,7 @@ fn model(material: SyntheticMaterial, periodic: bool) -> MaterialModel {
         kind: ModelKind::Car2d,
         clusters: 6,
         periodic,
-        exemplar_side: if periodic { EXEMPLAR_SIDE } else { 0 },
+        exemplar_side: (!periodic).then_some(0),
         ..AnalysisOptions::default()
     };
     analyze(&btf, &options, &NoProgress).unwrap().0

@@ -80,6 +80,32 @@ pub fn frankot_chellappa(normals: &Array3<f64>) -> Array2<f64> {
 /// # Panics
 /// Shapes that differ.
 pub fn integrate_on_torus(right: &Array2<f64>, down: &Array2<f64>) -> Array2<f64> {
+    solve_on_torus(right, down, |_| 1.0)
+}
+
+/// [`integrate_on_torus`] less the result's Gaussian blur of standard deviation `sigma`
+/// samples (wrapping around): only the detail finer than about `sigma`, the blur applied in the
+/// same DFT as the integration (the transfer `1 - exp(-2 pi^2 sigma^2 |f|^2)`, `f` in cycles a
+/// sample) instead of as a separate convolution.
+///
+/// # Panics
+/// Shapes that differ.
+pub fn integrate_detail_on_torus(
+    right: &Array2<f64>,
+    down: &Array2<f64>,
+    sigma: f64,
+) -> Array2<f64> {
+    let k = -2.0 * std::f64::consts::PI.powi(2) * sigma * sigma;
+    solve_on_torus(right, down, |f2| 1.0 - (k * f2).exp())
+}
+
+/// The Poisson solve of [`integrate_on_torus`], each frequency's result multiplied by
+/// `gain(|f|^2)` (`f` in cycles a sample, folded into -1/2..1/2 on each axis).
+fn solve_on_torus(
+    right: &Array2<f64>,
+    down: &Array2<f64>,
+    gain: impl Fn(f64) -> f64,
+) -> Array2<f64> {
     assert_eq!(right.dim(), down.dim(), "difference planes of one shape");
     let (h, w) = right.dim();
     if h == 0 || w == 0 {
@@ -87,15 +113,25 @@ pub fn integrate_on_torus(right: &Array2<f64>, down: &Array2<f64>) -> Array2<f64
     }
     let (fx, fy) = (fft::forward(right), fft::forward(down));
     let tau = 2.0 * std::f64::consts::PI;
-    // The DFT of a forward difference along an axis of n samples at bin k: e^(i tau k / n) - 1.
-    let shift = |k: usize, n: usize| Complex64::from_polar(1.0, tau * k as f64 / n as f64) - 1.0;
+    // Per axis and bin k of n: the DFT of a forward difference, e^(i tau k / n) - 1, and the
+    // squared frequency folded into -1/2..1/2 cycles a sample.
+    let axis = |n: usize| -> Vec<(Complex64, f64)> {
+        (0..n)
+            .map(|k| {
+                let f = k as f64 / n as f64;
+                let folded = if f > 0.5 { f - 1.0 } else { f };
+                (Complex64::from_polar(1.0, tau * f) - 1.0, folded * folded)
+            })
+            .collect()
+    };
+    let (rows, cols) = (axis(h), axis(w));
     let spectrum = Array2::from_shape_fn((h, w), |(kr, kc)| {
-        let (dy, dx) = (shift(kr, h), shift(kc, w));
+        let ((dy, fy2), (dx, fx2)) = (rows[kr], cols[kc]);
         let denom = dx.norm_sqr() + dy.norm_sqr();
         if denom < 1e-12 {
             Complex64::new(0.0, 0.0)
         } else {
-            (dx.conj() * fx[[kr, kc]] + dy.conj() * fy[[kr, kc]]) / denom
+            (dx.conj() * fx[[kr, kc]] + dy.conj() * fy[[kr, kc]]) * (gain(fy2 + fx2) / denom)
         }
     });
     fft::inverse_real(&spectrum)

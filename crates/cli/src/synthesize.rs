@@ -30,7 +30,8 @@ struct SynthesizeReport<'a> {
 /// Synthesize from a model: any size, any view and light, seed-deterministic. Only the
 /// subspace images that the requested (view, light) pairs need are synthesized.
 ///
-/// With one --view and one --light and an --out ending in .png or .exr, writes that one image;
+/// With one --view and one --light and an --out ending in .png or .exr, writes that one image
+/// (a direction may be omitted where the model measured only one, as for a photograph);
 /// otherwise a zip (--out X.zip) or folder of every requested view x light (the model's
 /// measured directions when none are given): with UBO2003 names when every direction is in
 /// whole degrees (the names hold whole degrees only), else, for a single-view model such as
@@ -41,6 +42,7 @@ struct SynthesizeReport<'a> {
 /// Examples:
 ///   btfmrf synthesize stones.btfm --size 1024 --view 0,0 --light 45,90 --out lit.png
 ///   btfmrf synthesize stones.btfm --size 256 --out enlarged.zip
+///   btfmrf synthesize gravel.btfm --size 2048 --out big.png    (a photograph's model)
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
@@ -160,10 +162,10 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         }
     }
     let start = Instant::now();
-    if let Some((view, light)) = single_pair(&args)? {
-        let subspaces = model.subspace_weights(view, light)?.len();
+    if let Some((view, light)) = single_pair(&args, model.views(), model.lights())? {
+        let subspaces = model.subspace_weights(&view, &light)?.len();
         global.check_synthesis("--size", (rows, cols), subspaces, memory::synthesis_bytes)?;
-        let image = model.synthesize_image(view, light, &options)?;
+        let image = model.synthesize_image(&view, &light, &options)?;
         let seconds = start.elapsed().as_secs_f64();
         io::write_image(&args.out, &image)
             .with_context(|| format!("writing {}", args.out.display()))?;
@@ -251,8 +253,8 @@ fn run_lpca(model: lpca::LpcaModel, args: Args, global: &Global) -> anyhow::Resu
         );
     }
     let start = Instant::now();
-    let images = if let Some((view, light)) = single_pair(&args)? {
-        let image = model.reconstruct_direction(view, light)?;
+    let images = if let Some((view, light)) = single_pair(&args, model.views(), model.lights())? {
+        let image = model.reconstruct_direction(&view, &light)?;
         io::write_image(&args.out, &image)
             .with_context(|| format!("writing {}", args.out.display()))?;
         1
@@ -295,9 +297,13 @@ const OTHER_IMAGE_EXTENSIONS: [&str; 9] = [
 ];
 
 /// The one (view, light) pair to write when `--out` names a single image (.png, .exr, .jpg,
-/// .jpeg);
-/// `None` when it names a BTF (zip or folder).
-fn single_pair(args: &Args) -> anyhow::Result<Option<(&Direction, &Direction)>> {
+/// .jpeg), given or, where the model measured only one, the measured one; `None` when `--out`
+/// names a BTF (zip or folder).
+fn single_pair(
+    args: &Args,
+    views: &DirectionSet,
+    lights: &DirectionSet,
+) -> anyhow::Result<Option<(Direction, Direction)>> {
     let out_name = args.out.to_string_lossy().to_ascii_lowercase();
     if io::ImageFormat::from_name(&out_name).is_none() {
         // An image-like name we cannot write would otherwise become a folder of that name.
@@ -310,10 +316,17 @@ fn single_pair(args: &Args) -> anyhow::Result<Option<(&Direction, &Direction)>> 
         }
         return Ok(None);
     }
-    match (args.view.as_slice(), args.light.as_slice()) {
-        ([view], [light]) => Ok(Some((view, light))),
+    // A direction may be omitted where the model measured only one (a photograph's model).
+    let one = |given: &[Direction], measured: &DirectionSet| match given {
+        [d] => Some(*d),
+        [] if measured.len() == 1 => measured.iter().next().copied(),
+        _ => None,
+    };
+    match (one(&args.view, views), one(&args.light, lights)) {
+        (Some(view), Some(light)) => Ok(Some((view, light))),
         _ => bail!(
-            "one image (--out {}) needs exactly one --view and one --light",
+            "one image (--out {}) needs exactly one --view and one --light (they may be \
+             omitted only where the model measured a single view or light)",
             args.out.display()
         ),
     }

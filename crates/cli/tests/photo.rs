@@ -70,6 +70,8 @@ fn a_photograph_is_analysed_and_enlarged_end_to_end() {
     ]))
     .unwrap();
     assert_eq!(json["exemplar_bytes"], 0);
+    // One light: no relief to estimate, and nothing repaired to report.
+    assert_eq!(json["repairs"], serde_json::json!([]), "{json}");
     enlarge(&model, &big);
     let plain = y
         .judge(&btfmrf::btf::io::read_image(&big).unwrap())
@@ -124,16 +126,14 @@ fn several_photographs_or_a_non_image_are_refused_with_what_was_expected() {
 }
 
 /// Synthesizes `model` at 1024^2 under the zenith light into `out`.
+/// `synthesize` of a photograph's model to one 1024^2 image: no --view or --light needed, the
+/// model measured one of each.
 fn enlarge(model: &Path, out: &Path) {
     ok(&[
         "synthesize",
         s(model),
         "--size",
         "1024",
-        "--view",
-        "0,0",
-        "--light",
-        "0,0",
         "--out",
         s(out),
         "-q",
