@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use crate::btf::{Direction, Weighted};
 use crate::decompose::marginals::{self, MarginalMap};
 use crate::decompose::{Border, ColourSpace, Pyramid};
-use crate::geometry::integrate::{Edges, normals_of_periodic};
+use crate::geometry::integrate::{Edges, normals_of, normals_of_periodic};
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::relight::{SHADING_FLOOR, shading_factor};
 use crate::geometry::{
@@ -43,6 +43,19 @@ pub struct SynthesisOptions {
     /// Needs sizes divisible by the pyramid step
     /// ([`pyramid_step`](crate::decompose::pyramid::pyramid_step)).
     pub tileable: bool,
+}
+
+impl SynthesisOptions {
+    /// How differences of the output's relief treat its borders: wrapping around for a
+    /// tileable output (its relief is periodic), edge samples repeated otherwise (a plain
+    /// output's relief is cut from a larger torus, so its opposite edges do not meet).
+    pub fn edges(&self) -> Edges {
+        if self.tileable {
+            Edges::Wrap
+        } else {
+            Edges::Clamp
+        }
+    }
 }
 
 /// Subspace images (made on first use) and the range map for one size and seed; see
@@ -118,13 +131,17 @@ impl SynthesisCache {
         self.subspaces.get(k).and_then(|s| s.get())
     }
 
-    /// Unit normals of the range map at the cache's size (which is periodic, see
-    /// [`MaterialModel::range_heights`]), shape (3, rows, cols); `None` without a range map.
+    /// Unit normals of the range map at the cache's size (periodic when the cache is
+    /// tileable, see [`MaterialModel::range_heights`] and [`SynthesisOptions::edges`]), shape
+    /// (3, rows, cols); `None` without a range map.
     pub fn normals(&self) -> Option<&Array3<f64>> {
         self.normals
             .get_or_init(|| {
                 let heights = self.heights.as_ref()?;
-                Some(normals_of_periodic(heights))
+                Some(match self.options.edges() {
+                    Edges::Wrap => normals_of_periodic(heights),
+                    Edges::Clamp => normals_of(heights),
+                })
             })
             .as_ref()
     }
@@ -460,7 +477,7 @@ impl MaterialModel {
         let mut out = out.unwrap_or_else(|| Array3::zeros((3, o.rows, o.cols)));
         if let Some(heights) = &cache.heights {
             let strength = self.bump_strength(light)?;
-            bump_relight(&mut out, heights, Edges::Wrap, light, strength);
+            bump_relight(&mut out, heights, o.edges(), light, strength);
         }
         Ok(out)
     }
