@@ -584,20 +584,8 @@ impl MaterialModel {
             return Some(details);
         }
         let e = self.exemplar()?;
-        let (tr, tc) = quilt_torus(o, patch_side(e.rows, e.cols));
-        let (_, details) = quilt_laid(
-            &e.crop(0)?,
-            &exemplar_planes(e),
-            tr,
-            tc,
-            crate::mrf::noise::mix(o.seed, EXEMPLAR_SEED),
-        );
-        Some(zero_mean(
-            details
-                .into_iter()
-                .map(|d| cropped(d, o.rows, o.cols))
-                .collect(),
-        ))
+        let seed = crate::mrf::noise::mix(o.seed, EXEMPLAR_SEED);
+        Some(laid_exemplar(&e.crop(0)?, e, o, seed).1)
     }
 
     /// The range map's heights ([`MaterialModel::range_heights`], the same values) and the
@@ -610,13 +598,7 @@ impl MaterialModel {
             return None;
         }
         let seed = crate::mrf::noise::mix(o.seed, RANGE_SEED);
-        let (tr, tc) = quilt_torus(o, patch_side(e.rows, e.cols));
-        let (heights, details) = quilt_laid(&map.samples(), &exemplar_planes(e), tr, tc, seed);
-        let details = details
-            .into_iter()
-            .map(|d| cropped(d, o.rows, o.cols))
-            .collect();
-        Some((cropped(heights, o.rows, o.cols), zero_mean(details)))
+        Some(laid_exemplar(&map.samples(), e, o, seed))
     }
 
     /// The bump strength for `light`: the measured lights' fitted strengths
@@ -670,6 +652,24 @@ fn cropped(field: Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
 
 /// Mixed into the synthesis seed for the range map's quilt (the bands use their own indices).
 const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
+/// `guide` quilted for the output of `o` (on [`quilt_torus`], then cropped) with the
+/// exemplar's basis crops laid by the same patches ([`quilt_laid`]): the guide's quilt and
+/// the crops' zero-mean details.
+fn laid_exemplar(
+    guide: &Array2<f64>,
+    e: &Exemplar,
+    o: &SynthesisOptions,
+    seed: u64,
+) -> (Array2<f64>, Vec<Array2<f64>>) {
+    let (tr, tc) = quilt_torus(o, patch_side(e.rows, e.cols));
+    let (guide, details) = quilt_laid(guide, &exemplar_planes(e), tr, tc, seed);
+    let details = details
+        .into_iter()
+        .map(|d| cropped(d, o.rows, o.cols))
+        .collect();
+    (cropped(guide, o.rows, o.cols), zero_mean(details))
+}
+
 /// The exemplar's basis crops (mean, then deviations) as planes.
 fn exemplar_planes(e: &Exemplar) -> Vec<Array2<f64>> {
     (0..e.lightness.basis.len())

@@ -340,11 +340,15 @@ fn choose(
         return (y, x, 0.0);
     }
     let fits_inside = hr <= sr && hc <= sc;
-    let coarse: Vec<(usize, usize, f64)> = known
+    let mut coarse: Vec<(usize, usize, f64)> = known
         .iter()
         .copied()
         .filter(|k| k.0 % COARSE_STRIDE == 0)
         .collect();
+    if coarse.is_empty() {
+        // A thin band on rows the stride skips (tiny patches): score on all of it.
+        coarse = known.to_vec();
+    }
     let rough = misfits(source, &candidates, &coarse, fits_inside);
     let mut order: Vec<usize> = (0..candidates.len()).collect();
     order.sort_by(|&a, &b| rough[a].0.total_cmp(&rough[b].0));
@@ -366,8 +370,8 @@ fn choose(
 /// For each candidate source offset, the squared error of its samples against the `known`
 /// output samples (patch row, column, value) after the best lift, and that lift (the mean
 /// difference). `inside`: every candidate patch lies inside the source, so each run of known
-/// samples along a patch row is compared with a contiguous run of the source (four lanes at a
-/// time, which the compiler vectorises); otherwise the source is read sample by sample,
+/// samples along a patch row is compared with a contiguous run of the source (in four
+/// independent accumulators, so the sums need not wait on each other); otherwise the source is read sample by sample,
 /// wrapping around.
 fn misfits(
     source: &Array2<f64>,
@@ -379,10 +383,10 @@ fn misfits(
     let n = known.len().max(1) as f64;
     let flat = source.as_slice().filter(|_| inside);
     // Runs of consecutive known samples along a patch row: (offset from the candidate's
-    // corner in the source, first index into `values`, length).
+    // corner in the source, first index into `values`, length); only the flat reads use them.
     let values: Vec<f64> = known.iter().map(|k| k.2).collect();
     let mut runs: Vec<(usize, usize, usize)> = Vec::new();
-    for (i, &(y, x, _)) in known.iter().enumerate() {
+    for (i, &(y, x, _)) in known.iter().enumerate().filter(|_| flat.is_some()) {
         let extends = i > 0 && known[i - 1].0 == y && known[i - 1].1 + 1 == x;
         match runs.last_mut() {
             Some(run) if extends => run.2 += 1,
