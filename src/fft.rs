@@ -7,8 +7,12 @@ use rayon::prelude::*;
 use rustfft::FftPlanner;
 use rustfft::num_complex::{Complex32, Complex64};
 
-/// In-place 2D transform of a row-major `rows x cols` buffer.
+/// In-place 2D transform of a row-major `rows x cols` buffer; the 1D transforms of each pass
+/// run in parallel batches.
 fn transform(data: &mut Vec<Complex64>, rows: usize, cols: usize, inverse: bool) {
+    if data.is_empty() {
+        return;
+    }
     let mut planner = FftPlanner::<f64>::new();
     let mut scratch = vec![Complex64::new(0.0, 0.0); data.len()];
     for (n, m) in [(cols, rows), (rows, cols)] {
@@ -18,7 +22,8 @@ fn transform(data: &mut Vec<Complex64>, rows: usize, cols: usize, inverse: bool)
         } else {
             planner.plan_fft_forward(n)
         };
-        fft.process(data);
+        data.par_chunks_mut(batch(n))
+            .for_each(|chunk| fft.process(chunk));
         transpose::transpose(data, &mut scratch, n, m);
         std::mem::swap(data, &mut scratch);
     }
@@ -28,6 +33,14 @@ fn transform(data: &mut Vec<Complex64>, rows: usize, cols: usize, inverse: bool)
 pub(crate) fn forward(real: &Array2<f64>) -> Array2<Complex64> {
     let (rows, cols) = real.dim();
     let mut data: Vec<Complex64> = real.iter().map(|&v| Complex64::new(v, 0.0)).collect();
+    transform(&mut data, rows, cols, false);
+    Array2::from_shape_vec((rows, cols), data).expect("rows x cols values")
+}
+
+/// Forward 2D DFT of a complex plane (unnormalised).
+pub(crate) fn forward_complex(plane: Array2<Complex64>) -> Array2<Complex64> {
+    let (rows, cols) = plane.dim();
+    let mut data = plane.into_raw_vec_and_offset().0;
     transform(&mut data, rows, cols, false);
     Array2::from_shape_vec((rows, cols), data).expect("rows x cols values")
 }

@@ -68,8 +68,17 @@ pub struct SynthesisCache {
     normals: OnceLock<Option<Array3<f64>>>,
     /// The exemplar's basis crops quilted with one layout (zero mean each), made on first use;
     /// `None` without an exemplar.
-    structure: OnceLock<Option<Vec<Array2<f64>>>>,
+    structure: OnceLock<Option<LaidExemplar>>,
     noise: NoiseBank,
+}
+
+/// An exemplar's basis fields quilted onto the output with one layout, zero mean each.
+#[derive(Debug, Clone)]
+struct LaidExemplar {
+    /// One per L* basis crop (the mean, then the deviations).
+    lightness: Vec<Array2<f64>>,
+    /// One (a*, b*) pair per chroma basis field; empty without stored chroma.
+    chroma: Vec<[Array2<f64>; 2]>,
 }
 
 /// The driving noise of the bands by band seed. Every subspace image uses the same noise for a
@@ -255,7 +264,7 @@ impl MaterialModel {
         k: usize,
         o: &SynthesisOptions,
         noise: &NoiseBank,
-        structure: &OnceLock<Option<Vec<Array2<f64>>>>,
+        structure: &OnceLock<Option<LaidExemplar>>,
     ) -> Result<Array3<f32>> {
         let s = self.subspaces().get(k).ok_or_else(|| {
             ModelError::parameter("subspace", format!("{k} of {}", self.subspaces().len()))
@@ -302,17 +311,35 @@ impl MaterialModel {
         });
         if let Some(e) = self.exemplar()
             && s.kl.space == ColourSpace::Lab
-            && let Some(details) = structure.get_or_init(|| self.exemplar_details(o)).as_ref()
-            && let Some(coefficients) = e.lightness.coefficients(k)
+            && let Some(laid) = structure.get_or_init(|| self.exemplar_details(o)).as_ref()
         {
-            // The MRF's L* keeps what is coarser than the exemplar's patches; this subspace's
-            // quilted crop (its weights on the quilted basis) brings the structure finer.
+            // The MRF's L* (and a*, b* where the exemplar stores chroma) keeps what is coarser
+            // than the exemplar's patches; this subspace's quilted crop (its weights on the
+            // quilted basis) brings the structure finer.
             let sigma = detail_scale(e.rows, e.cols);
-            let (mut lightness, _) = split_detail(&colours[0], sigma, o.tileable);
-            for (c, detail) in coefficients.into_iter().zip(details) {
-                lightness.scaled_add(c, detail);
+            let with_detail = |plane: &Array2<f64>, details: Vec<(f64, &Array2<f64>)>| {
+                let (mut coarse, _) = split_detail(plane, sigma, o.tileable);
+                for (c, detail) in details {
+                    coarse.scaled_add(c, detail);
+                }
+                coarse
+            };
+            if let Some(coefficients) = e.lightness.coefficients(k) {
+                colours[0] = with_detail(
+                    &colours[0],
+                    coefficients.into_iter().zip(&laid.lightness).collect(),
+                );
             }
-            colours[0] = lightness;
+            if let Some(coefficients) = e.chroma.as_ref().and_then(|c| c.fields.coefficients(k)) {
+                for channel in 0..2 {
+                    let details = coefficients
+                        .iter()
+                        .zip(&laid.chroma)
+                        .map(|(&c, planes)| (c, &planes[channel]))
+                        .collect();
+                    colours[1 + channel] = with_detail(&colours[1 + channel], details);
+                }
+            }
         }
         if let Some(c) = &s.colour_marginals {
             c.transfer(&mut colours);
@@ -424,7 +451,7 @@ impl MaterialModel {
         &self,
         o: &SynthesisOptions,
         heights: Array2<f64>,
-        details: Vec<Array2<f64>>,
+        details: LaidExemplar,
         noise: NoiseBank,
     ) -> SynthesisCache {
         let cache = self.empty_cache(o, Some(heights), noise);
@@ -579,7 +606,7 @@ impl MaterialModel {
     /// first subspace's crop, seeded by the synthesis seed), zero mean each; `None` without an
     /// exemplar. An exemplar registered with the range map is laid with the relief's own
     /// patches instead ([`MaterialModel::laid_together`]).
-    fn exemplar_details(&self, o: &SynthesisOptions) -> Option<Vec<Array2<f64>>> {
+    fn exemplar_details(&self, o: &SynthesisOptions) -> Option<LaidExemplar> {
         if let Some((_, details)) = self.laid_together(o) {
             return Some(details);
         }
@@ -592,7 +619,7 @@ impl MaterialModel {
     /// exemplar's zero-mean basis details from one quilt ([`quilt_laid`]), when the exemplar is
     /// registered with a map sampled at every pixel and no lattice lays the relief: a pit in
     /// the relief and its dark colour then stay together. `None` otherwise.
-    fn laid_together(&self, o: &SynthesisOptions) -> Option<(Array2<f64>, Vec<Array2<f64>>)> {
+    fn laid_together(&self, o: &SynthesisOptions) -> Option<(Array2<f64>, LaidExemplar)> {
         let (map, e) = (self.range_map()?, self.exemplar()?);
         if map.step != 1 || (map.rows, map.cols) != (e.rows, e.cols) || self.periodic().is_some() {
             return None;
@@ -660,21 +687,37 @@ fn laid_exemplar(
     e: &Exemplar,
     o: &SynthesisOptions,
     seed: u64,
-) -> (Array2<f64>, Vec<Array2<f64>>) {
+) -> (Array2<f64>, LaidExemplar) {
     let (tr, tc) = quilt_torus(o, patch_side(e.rows, e.cols));
     let (guide, details) = quilt_laid(guide, &exemplar_planes(e), tr, tc, seed);
-    let details = details
-        .into_iter()
-        .map(|d| cropped(d, o.rows, o.cols))
-        .collect();
-    (cropped(guide, o.rows, o.cols), zero_mean(details))
+    let mut details = zero_mean(
+        details
+            .into_iter()
+            .map(|d| cropped(d, o.rows, o.cols))
+            .collect(),
+    )
+    .into_iter();
+    let lightness = details.by_ref().take(e.lightness.basis.len()).collect();
+    let mut chroma = Vec::new();
+    while let (Some(a), Some(b)) = (details.next(), details.next()) {
+        chroma.push([a, b]);
+    }
+    (
+        cropped(guide, o.rows, o.cols),
+        LaidExemplar { lightness, chroma },
+    )
 }
 
-/// The exemplar's basis crops (mean, then deviations) as planes.
+/// The exemplar's basis crops as planes at the crop's pixels: the L* mean and deviations, then
+/// each chroma basis field's a* and b*.
 fn exemplar_planes(e: &Exemplar) -> Vec<Array2<f64>> {
-    (0..e.lightness.basis.len())
-        .filter_map(|j| e.plane(j))
-        .collect()
+    let lightness = (0..e.lightness.basis.len()).filter_map(|j| e.plane(j));
+    let chroma = e.chroma.iter().flat_map(|c| {
+        (0..c.fields.basis.len())
+            .filter_map(|j| c.crop_planes(j, e.rows, e.cols))
+            .flatten()
+    });
+    lightness.chain(chroma).collect()
 }
 
 /// `fields`, each less its mean.

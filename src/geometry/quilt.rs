@@ -14,7 +14,7 @@ use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
 
-use super::integrate::integrate_detail_on_torus;
+use super::integrate::{integrate_detail_on_torus, integrate_detail_pair_on_torus};
 
 /// Patch side as a fraction of the source's smaller side (patches much smaller than the
 /// source give many candidates; much larger keep more of each structure intact).
@@ -163,7 +163,7 @@ fn quilt_patches(
         .map(|c| high_pass(c, sigma, false))
         .collect();
     // The companions' differences (to the right, downward), laid like the source's.
-    let mut companion_steps: Vec<(Array2<f64>, Array2<f64>)> = companions
+    let mut companion_steps: Vec<Steps> = companions
         .iter()
         .map(|_| {
             (
@@ -240,19 +240,41 @@ fn quilt_patches(
     // cuts could not hide (a patch that fits its last neighbours on three or four sides only
     // roughly) is spread smoothly instead of left as a line of steps. The patches' lifts
     // wander; take out what the result holds above the patch scale, keep the source's mean.
-    let mut out = integrate_detail_on_torus(&right, &down, sigma);
+    // The integrations are independent: in parallel, the source's alone (so its heights do not
+    // depend on the companions, not even in rounding), the companions' two a solve.
+    let (mut out, laid) = rayon::join(
+        || integrate_detail_on_torus(&right, &down, sigma),
+        || {
+            let fields: Vec<(&Array2<f64>, Steps)> =
+                companions.iter().zip(companion_steps).collect();
+            fields
+                .par_chunks(2)
+                .flat_map_iter(|pair| {
+                    let integrated = match pair {
+                        [(_, (ra, da)), (_, (rb, db))] => {
+                            let (a, b) = integrate_detail_pair_on_torus((ra, da), (rb, db), sigma);
+                            vec![a, b]
+                        }
+                        _ => pair
+                            .iter()
+                            .map(|(_, (r, d))| integrate_detail_on_torus(r, d, sigma))
+                            .collect(),
+                    };
+                    // Each at its companion's mean.
+                    pair.iter().zip(integrated).map(|((c, _), mut laid)| {
+                        laid += c.mean().unwrap_or(0.0) - laid.mean().unwrap_or(0.0);
+                        laid
+                    })
+                })
+                .collect::<Vec<_>>()
+        },
+    );
     out += source.mean().unwrap_or(0.0) - out.mean().unwrap_or(0.0);
-    let laid = companions
-        .par_iter()
-        .zip(companion_steps)
-        .map(|(c, (r, d))| {
-            let mut laid = integrate_detail_on_torus(&r, &d, sigma);
-            laid += c.mean().unwrap_or(0.0) - laid.mean().unwrap_or(0.0);
-            laid
-        })
-        .collect();
     (out, label, laid)
 }
+
+/// A field's differences on the torus: to the right neighbour, to the one below.
+type Steps = (Array2<f64>, Array2<f64>);
 
 /// `field` minus its Gaussian blur of standard deviation `sigma` samples (edges repeated, or
 /// wrapped around for a torus), at the field's mean level: the detail finer than about `sigma`.

@@ -111,7 +111,7 @@ pub fn is_lpca(bytes: &[u8]) -> bool {
 
 fn parse(bytes: &[u8]) -> Parse<LpcaModel> {
     let payload = envelope::open(bytes, MAGIC, ".lpca", VERSION, MAX_PAYLOAD)?;
-    let mut r = Reader::new(payload);
+    let mut r = Reader::new(&payload);
     let method = match r.u8()? {
         0 => Method::Lpca,
         1 => Method::PcaBtf,

@@ -4,8 +4,9 @@
 use std::path::Path;
 
 use super::material::{
-    BandMarginals, Exemplar, MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES,
-    MaterialModel, MaterialParts, PeriodicPart, Principal, RangeMap, SubspaceModel,
+    BandMarginals, Exemplar, ExemplarChroma, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS,
+    MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, PeriodicPart, Principal,
+    RangeMap, SubspaceModel,
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
@@ -21,9 +22,9 @@ use crate::mrf::{AnyLevels, BandModel, KindVisitor, Levels, LevelsVisitor, Model
 pub const MAGIC: [u8; 4] = *b"BTFM";
 /// The format version this library writes. Version 1 files (no colour space, no band
 /// marginals: linear RGB KL), version 2 files (no joint colour tables) and version 3 files (no
-/// periodic part) and version 4 files (one exemplar crop with a gain per subspace) are still
-/// read.
-pub const VERSION: u16 = 5;
+/// periodic part), version 4 files (one exemplar crop with a gain per subspace) and version 5
+/// files (no exemplar chroma) are still read.
+pub const VERSION: u16 = 6;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -94,8 +95,14 @@ impl KindVisitor for ReadLevels<'_, '_> {
     }
 }
 
-/// Serialises a model to bytes (header, payload, CRC-32 of the payload).
+/// Serialises a model to bytes: the envelope's header, the payload ([`to_payload`]) deflated,
+/// the CRC-32 of the stored bytes.
 pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
+    envelope::seal_deflated(MAGIC, VERSION, &to_payload(model))
+}
+
+/// The payload a model file holds, before it is deflated: what the reader parses (docs/FORMAT.md).
+pub fn to_payload(model: &MaterialModel) -> Vec<u8> {
     let mut w = Writer(Vec::new());
     w.u8(model.kind().code());
     w.u32(model.width());
@@ -141,7 +148,7 @@ pub fn to_bytes(model: &MaterialModel) -> Vec<u8> {
     }
     write_colour(&mut w, model);
     write_pair_gains(&mut w, model);
-    envelope::seal(MAGIC, VERSION, &w.0)
+    w.0
 }
 
 /// Codes per octave of a stored pair gain: a step of 2.2 %, finer than a visible brightness
@@ -235,10 +242,14 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
     match model.exemplar() {
         None => w.u8(0),
         Some(e) => {
-            w.u8(1);
+            w.u8(if e.chroma.is_some() { 2 } else { 1 });
             w.u16(e.rows as u16);
             w.u16(e.cols as u16);
             write_principal(w, &e.lightness, Storage::Byte);
+            if let Some(c) = &e.chroma {
+                w.u8(c.step as u8);
+                write_principal(w, &c.fields, Storage::Byte);
+            }
         }
     }
     write_periodic(w, model);
@@ -308,9 +319,13 @@ pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
 
 /// Bytes the structure exemplar takes in the file (0 without one).
 pub fn exemplar_bytes(model: &MaterialModel) -> usize {
-    model
-        .exemplar()
-        .map_or(0, |e| 4 + principal_bytes(&e.lightness, Storage::Byte))
+    model.exemplar().map_or(0, |e| {
+        let chroma = e
+            .chroma
+            .as_ref()
+            .map_or(0, |c| 1 + principal_bytes(&c.fields, Storage::Byte));
+        4 + principal_bytes(&e.lightness, Storage::Byte) + chroma
+    })
 }
 
 /// Bytes the joint colour tables take in the file (0 without them).
@@ -495,7 +510,7 @@ pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<MaterialModel> {
 fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     let (version, payload) =
         envelope::open_versions(bytes, MAGIC, ".btfm", 1..=VERSION, MAX_PAYLOAD)?;
-    let mut r = Reader::new(payload);
+    let mut r = Reader::new(&payload);
     let code = r.u8()?;
     let kind = ModelKind::from_code(code).ok_or_else(|| format!("unknown model kind {code}"))?;
     let (width, height) = (r.u32()?, r.u32()?);
@@ -761,11 +776,12 @@ fn read_colour_marginals(r: &mut Reader, subspaces: &mut [SubspaceModel]) -> Par
 /// Reads the structure exemplar (see [`write_colour`]), if any: from version 5 a mean crop,
 /// principal deviations and weights; in versions 3 and 4 one crop and a detail gain per
 /// subspace, which is the same as a zero mean, that crop as the one deviation and the gains
-/// as the weights (only the crops' detail is used).
+/// as the weights (only the crops' detail is used). From version 6, flag 2 adds the chroma:
+/// its block side, then its mean and deviations.
 fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<Exemplar>> {
     match r.u8()? {
         0 => Ok(None),
-        1 => {
+        flag @ (1 | 2) if flag == 1 || version >= 6 => {
             let (rows, cols) = (usize::from(r.u16()?), usize::from(r.u16()?));
             if rows == 0 || cols == 0 {
                 return Err("empty exemplar".into());
@@ -786,10 +802,35 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
                     weights: gains.into_iter().map(|g| vec![g as f32]).collect(),
                 }
             };
+            let chroma = if flag == 2 {
+                let step = usize::from(r.u8()?);
+                if !(1..=MAX_CHROMA_STEP).contains(&step) {
+                    return Err(format!(
+                        "exemplar chroma block of {step} (1..={MAX_CHROMA_STEP})"
+                    ));
+                }
+                let (chroma_rows, chroma_cols) = (rows.div_ceil(step), cols.div_ceil(step));
+                let fields = read_principal(
+                    r,
+                    2 * chroma_rows * chroma_cols,
+                    clusters,
+                    (MAX_EXEMPLAR_COMPONENTS, Storage::Byte),
+                    "exemplar chroma value",
+                )?;
+                Some(ExemplarChroma {
+                    step,
+                    rows: chroma_rows,
+                    cols: chroma_cols,
+                    fields,
+                })
+            } else {
+                None
+            };
             Ok(Some(Exemplar {
                 rows,
                 cols,
                 lightness,
+                chroma,
             }))
         }
         f => Err(format!("unknown exemplar flag {f}")),

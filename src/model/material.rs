@@ -260,6 +260,87 @@ pub struct Exemplar {
     /// The crops' L*: mean and up to [`MAX_EXEMPLAR_COMPONENTS`] principal deviations,
     /// `rows * cols` values each, row-major.
     pub lightness: Principal,
+    /// The crops' chroma at a coarser sampling, if stored (format version 6).
+    pub chroma: Option<ExemplarChroma>,
+}
+
+/// The CIE a* and b* of an exemplar's crops, averaged over `step` x `step` blocks (chroma
+/// needs less resolution than lightness; the L* detail carries the edges), stored like the
+/// lightness as a mean and principal deviations. Laid with the lightness' patches at
+/// synthesis, it keeps a stone's or a thread's own colour together with its shape, where the
+/// MRF's independent chroma factors mottle it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExemplarChroma {
+    /// Crop pixels per stored sample along each axis (1..=16).
+    pub step: usize,
+    /// Stored samples along the rows: `ceil(exemplar rows / step)`.
+    pub rows: usize,
+    /// Stored samples along the columns: `ceil(exemplar cols / step)`.
+    pub cols: usize,
+    /// Mean and principal deviations of the crops' chroma, `2 * rows * cols` values each:
+    /// the a* plane, then the b* plane, row-major.
+    pub fields: Principal,
+}
+
+/// The largest block side [`ExemplarChroma`] averages over.
+pub const MAX_CHROMA_STEP: usize = 16;
+
+impl ExemplarChroma {
+    /// `plane` averaged over `step` x `step` blocks (the last ones cut by the edge): how a
+    /// crop's chroma is stored.
+    pub fn block_means(plane: &Array2<f64>, step: usize) -> Array2<f64> {
+        let (rows, cols) = plane.dim();
+        let step = step.max(1);
+        Array2::from_shape_fn((rows.div_ceil(step), cols.div_ceil(step)), |(y, x)| {
+            plane
+                .slice(ndarray::s![
+                    y * step..((y + 1) * step).min(rows),
+                    x * step..((x + 1) * step).min(cols)
+                ])
+                .mean()
+                .unwrap_or(0.0)
+        })
+    }
+
+    /// Basis field `j`'s (a*, b*) planes at the crop's `rows` x `cols` pixels: the block means
+    /// interpolated bilinearly between the blocks' centres (held flat beyond the outer ones).
+    pub fn crop_planes(&self, j: usize, rows: usize, cols: usize) -> Option<[Array2<f64>; 2]> {
+        let step = self.step as f64;
+        // Fractional stored index of pixel p, and its two neighbours with the second's weight.
+        let axis = |p: usize, n: usize| {
+            let u = ((p as f64 + 0.5) / step - 0.5).clamp(0.0, (n - 1) as f64);
+            let i = (u.floor() as usize).min(n - 1);
+            (i, (i + 1).min(n - 1), u - i as f64)
+        };
+        let ys: Vec<_> = (0..rows).map(|y| axis(y, self.rows)).collect();
+        let xs: Vec<_> = (0..cols).map(|x| axis(x, self.cols)).collect();
+        let [a, b] = self.planes(j)?;
+        Some([a, b].map(|plane| {
+            Array2::from_shape_fn((rows, cols), |(y, x)| {
+                let ((y0, y1, fy), (x0, x1, fx)) = (ys[y], xs[x]);
+                let top = plane[(y0, x0)] * (1.0 - fx) + plane[(y0, x1)] * fx;
+                let bottom = plane[(y1, x0)] * (1.0 - fx) + plane[(y1, x1)] * fx;
+                top * (1.0 - fy) + bottom * fy
+            })
+        }))
+    }
+
+    /// Basis field `j` as its (a*, b*) planes at the stored sampling.
+    pub fn planes(&self, j: usize) -> Option<[Array2<f64>; 2]> {
+        let b = self.fields.basis.get(j)?;
+        let n = self.rows * self.cols;
+        let plane = |c: usize| {
+            Array2::from_shape_vec(
+                (self.rows, self.cols),
+                b.get(c * n..(c + 1) * n)?
+                    .iter()
+                    .map(|&v| f64::from(v))
+                    .collect(),
+            )
+            .ok()
+        };
+        Some([plane(0)?, plane(1)?])
+    }
 }
 
 impl Exemplar {
@@ -393,6 +474,26 @@ impl MaterialModel {
                 e.lightness.basis.len(),
                 1 + MAX_EXEMPLAR_COMPONENTS,
                 e.lightness.weights.len()
+            ));
+        }
+        if let Some(e) = &parts.exemplar
+            && let Some(c) = &e.chroma
+            && !((1..=MAX_CHROMA_STEP).contains(&c.step)
+                && c.rows == e.rows.div_ceil(c.step)
+                && c.cols == e.cols.div_ceil(c.step)
+                && c.fields
+                    .fits(2 * c.rows * c.cols, clusters, MAX_EXEMPLAR_COMPONENTS))
+        {
+            return bad(format!(
+                "exemplar chroma of {} x {} samples at step {} (1..={MAX_CHROMA_STEP}, covering the {} x {} crop) with {} basis fields (1..={}, 2 x rows x cols finite values each) and {} weight rows for {clusters} subspaces",
+                c.rows,
+                c.cols,
+                c.step,
+                e.rows,
+                e.cols,
+                c.fields.basis.len(),
+                1 + MAX_EXEMPLAR_COMPONENTS,
+                c.fields.weights.len()
             ));
         }
         if let Some(p) = &parts.periodic {
@@ -616,6 +717,42 @@ mod tests {
     }
 
     #[test]
+    fn chroma_blocks_interpolate_a_ramp_back_between_their_centres() {
+        // A linear ramp: block means are the ramp at the block centres, and bilinear
+        // interpolation between centres is exact for it, up to half a block from the edge.
+        let (rows, cols, step) = (12, 10, 2);
+        let ramp = Array2::from_shape_fn((rows, cols), |(y, x)| 3.0 * y as f64 - 2.0 * x as f64);
+        let means = ExemplarChroma::block_means(&ramp, step);
+        assert_eq!(means.dim(), (6, 5));
+        assert!((means[(1, 2)] - (3.0 * 2.5 - 2.0 * 4.5)).abs() < 1e-12);
+        let chroma = ExemplarChroma {
+            step,
+            rows: 6,
+            cols: 5,
+            fields: Principal {
+                basis: vec![
+                    means
+                        .iter()
+                        .chain(means.mapv(|v| -v).iter())
+                        .map(|&v| v as f32)
+                        .collect(),
+                ],
+                weights: vec![vec![]],
+            },
+        };
+        let [a, b] = chroma.crop_planes(0, rows, cols).unwrap();
+        for y in 1..rows - 1 {
+            for x in 1..cols - 1 {
+                assert!((a[(y, x)] - ramp[(y, x)]).abs() < 1e-4, "({y}, {x})");
+                assert!((b[(y, x)] + ramp[(y, x)]).abs() < 1e-4, "({y}, {x})");
+            }
+        }
+        // Beyond the outer centres the values are held flat.
+        assert!((a[(0, 0)] - means[(0, 0)]).abs() < 1e-4);
+        assert!(chroma.crop_planes(1, rows, cols).is_none());
+    }
+
+    #[test]
     fn consistent_parts_make_a_model_of_their_levels_kind() {
         let model = MaterialModel::new(parts()).unwrap();
         assert_eq!(model.kind(), ModelKind::Car2d);
@@ -690,6 +827,7 @@ mod tests {
                     basis: vec![vec![50.0; 4]],
                     weights: vec![vec![]],
                 },
+                chroma: None,
             })
         });
         assert!(e.contains("1 weight rows for 2 subspaces"), "{e}");
@@ -701,6 +839,7 @@ mod tests {
                 basis: vec![vec![50.0; 4], vec![1.0, -1.0, 2.0, 0.0]],
                 weights: vec![vec![0.0], vec![3.0]],
             },
+            chroma: None,
         };
         let model = MaterialModel::new(MaterialParts {
             exemplar: Some(exemplar.clone()),
@@ -720,6 +859,31 @@ mod tests {
             p.exemplar = Some(broken);
         });
         assert!(e.contains("exemplar of 2 x 2 samples"), "{e}");
+        // Chroma must cover the crop at its block side: 2 x 2 crop at step 2 is one sample.
+        let with_chroma = |rows: usize, step: usize| {
+            let mut e = exemplar.clone();
+            e.chroma = Some(ExemplarChroma {
+                step,
+                rows,
+                cols: rows,
+                fields: Principal {
+                    basis: vec![vec![1.0; 2 * rows * rows]],
+                    weights: vec![vec![], vec![]],
+                },
+            });
+            e
+        };
+        assert!(
+            MaterialModel::new(MaterialParts {
+                exemplar: Some(with_chroma(1, 2)),
+                ..parts()
+            })
+            .is_ok()
+        );
+        for (rows, step) in [(2, 2), (1, 0), (1, MAX_CHROMA_STEP + 1)] {
+            let e = refused(|p| p.exemplar = Some(with_chroma(rows, step)));
+            assert!(e.contains("exemplar chroma of"), "{e}");
+        }
         let periodic = PeriodicPart {
             lattice: Lattice {
                 rows: 8.0,

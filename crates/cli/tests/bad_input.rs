@@ -689,8 +689,8 @@ fn synthesize_output_extensions() {
     assert!(!tiff.exists());
 }
 
-/// Defect 8: the `.btfm` envelope's reserved flags must be zero (a later version's file is
-/// refused, not misread); files written so far have zero there and still load.
+/// Defect 8: the `.btfm` envelope's flags other than the deflate flag must be zero (a later
+/// version's file is refused, not misread); files written so far still load.
 #[test]
 fn unknown_model_flags_are_refused() {
     let good = std::fs::read(golden_model()).unwrap();
@@ -702,11 +702,11 @@ fn unknown_model_flags_are_refused() {
         }
     }
     let mut flagged = good.clone();
-    flagged[6] = 1;
+    flagged[6] = 2;
     let err = btfmrf::model::format::from_bytes(&flagged, Path::new("f.btfm"))
         .unwrap_err()
         .to_string();
-    assert!(err.contains("unknown flags 0x0001"), "{err}");
+    assert!(err.contains("unknown flags 0x0002"), "{err}");
     let lpca = {
         let mut f = lpca_file(1, &[]);
         f[7] = 0x80;

@@ -1,0 +1,158 @@
+//! The built-in materials judged at nine frontal lights: the setup behind the built-in rows of
+//! docs/BENCHMARKS.md (issue 11). Each material is generated at 128^2 (seed 5), analysed at the
+//! CLI's defaults (or `--clusters N`, `--model gmrf|2dcar|3dcar`), and its 128^2 synthesis
+//! (seed 1) judged against the measured image at every light; the another-crop level is the
+//! same material generated with seed 6, the other material the next built-in one. Prints one
+//! line per light and, per material, the geometric mean of the structure over the another-crop
+//! level and the mean colour distance; `--sheet DIR` also writes `DIR/<material>.png` (measured
+//! row above synthesized row, the nine lights left to right).
+//!
+//! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
+//! [--model KIND] [--no-colour-tables] [--verbose] [--sheet DIR]`; `--verbose` adds each
+//! light's subspace and its representative, and the share of the a* and b* variance in
+//! neighbour differences (near 0: colour constant over regions; 1: white noise).
+
+use std::path::PathBuf;
+
+use btfmrf::analysis::{AnalysisOptions, analyze};
+use btfmrf::btf::synthetic::SyntheticMaterial;
+use btfmrf::btf::{Btf, Direction};
+use btfmrf::decompose::ColourSpace;
+use btfmrf::eval::Yardstick;
+use btfmrf::eval::montage::montage;
+use btfmrf::model::ModelKind;
+use btfmrf::progress::NoProgress;
+use btfmrf::synthesis::SynthesisOptions;
+use ndarray::{Array3, s};
+
+/// Frontal-view lights (theta, phi degrees), every elevation of the Bonn set and several azimuths.
+const LIGHTS: [(f64, f64); 9] = [
+    (15.0, 120.0),
+    (30.0, 90.0),
+    (45.0, 20.0),
+    (45.0, 160.0),
+    (45.0, 280.0),
+    (60.0, 90.0),
+    (60.0, 234.0),
+    (75.0, 45.0),
+    (75.0, 195.0),
+];
+
+/// Per chroma plane (a*, b*) of `image`, `mean (p[x+1] - p[x])^2 / (2 var)`.
+fn fine_share(image: &Array3<f32>) -> [f64; 2] {
+    let [_, a, b] = ColourSpace::Lab.planes(image);
+    [a, b].map(|p| {
+        let steps = &p.slice(s![.., 1..]) - &p.slice(s![.., ..-1]);
+        let var = p.var(0.0).max(1e-12);
+        steps.mapv(|d| d * d).mean().unwrap_or(0.0) / (2.0 * var)
+    })
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let mut materials = Vec::new();
+    let mut options = AnalysisOptions::default();
+    let mut sheet: Option<PathBuf> = None;
+    let mut verbose = false;
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--clusters" => options.clusters = args.next().ok_or("--clusters N")?.parse()?,
+            "--model" => options.kind = args.next().ok_or("--model KIND")?.parse()?,
+            "--no-colour-tables" => options.colour_matching = false,
+            "--verbose" => verbose = true,
+            "--sheet" => sheet = Some(args.next().ok_or("--sheet DIR")?.into()),
+            m => materials.push(m.parse::<SyntheticMaterial>()?),
+        }
+    }
+    if materials.is_empty() {
+        materials = SyntheticMaterial::ALL.to_vec();
+    }
+    let kind: ModelKind = options.kind;
+    for material in materials {
+        let i = SyntheticMaterial::ALL
+            .iter()
+            .position(|&m| m == material)
+            .ok_or("unknown material")?;
+        let btf = Btf::synthetic(material, 128, 5)?;
+        let another = Btf::synthetic(material, 128, 6)?;
+        let other = Btf::synthetic(SyntheticMaterial::ALL[(i + 1) % 4], 128, 5)?;
+        let (model, _) = analyze(&btf, &options, &NoProgress)?;
+        let view = *btf.views().get(0).ok_or("no view")?;
+        let o = SynthesisOptions {
+            rows: 128,
+            cols: 128,
+            seed: 1,
+            tileable: false,
+        };
+        let cache = model.synthesis_cache(&o)?;
+        let (mut log_ratio, mut colour) = (0.0, 0.0);
+        let (mut measured_row, mut synthesized_row) = (Vec::new(), Vec::new());
+        for &(theta, phi) in &LIGHTS {
+            let light = Direction::new(theta, phi);
+            let l = btf
+                .lights()
+                .find(&light, 0.5)
+                .ok_or("light not in the Bonn set")?;
+            let measured = btf.image(0, l)?;
+            let y = Yardstick::from_samples(
+                &measured,
+                &another.image(0, l)?,
+                Some(&other.image(0, l)?),
+                1,
+            )?;
+            let image = model.image_from_cache(&cache, &view, &light)?;
+            if verbose {
+                let k = model.cluster_of(0, l)?;
+                let (rv, rl) = model.subspaces()[k].representative;
+                let (dv, dl) = (
+                    btf.views().get(rv.into()).ok_or("view")?,
+                    btf.lights().get(rl.into()).ok_or("light")?,
+                );
+                println!(
+                    "  subspace {k}, represented by view {}/{} light {}/{}",
+                    dv.theta_deg, dv.phi_deg, dl.theta_deg, dl.phi_deg
+                );
+            }
+            let v = y.judge(&image)?;
+            println!(
+                "{material} {kind} light {theta}/{phi}: structure {:.4} (x{:.2} crop, x{:.2} random phase), colour {:.2} Lab",
+                v.judgement.structure,
+                v.structure_vs_crop,
+                v.structure_vs_random_phase,
+                v.judgement.colour_lab
+            );
+            if verbose {
+                println!(
+                    "  a*, b* fine share: measured {:.3?}, synthesized {:.3?}",
+                    fine_share(&measured),
+                    fine_share(&image)
+                );
+            }
+            log_ratio += v.structure_vs_crop.ln();
+            colour += v.judgement.colour_lab;
+            measured_row.push(measured);
+            synthesized_row.push(image);
+        }
+        let n = LIGHTS.len() as f64;
+        use btfmrf::model::format;
+        println!(
+            "{material} {kind} ({} bytes: exemplar {}, colour tables {}, periodic {}, range map {}): x{:.2} the crop level (geometric mean), {:.2} Lab",
+            format::to_bytes(&model).len(),
+            format::exemplar_bytes(&model),
+            format::colour_marginal_bytes(&model),
+            format::periodic_bytes(&model),
+            model.range_map().map_or(0, |m| 2 * m.rows * m.cols),
+            (log_ratio / n).exp(),
+            colour / n
+        );
+        if let Some(dir) = &sheet {
+            std::fs::create_dir_all(dir)?;
+            let rows = vec![
+                measured_row.iter().collect(),
+                synthesized_row.iter().collect(),
+            ];
+            btfmrf::btf::io::write_image(&dir.join(format!("{material}.png")), &montage(&rows, 4))?;
+        }
+    }
+    Ok(())
+}
