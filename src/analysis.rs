@@ -883,7 +883,7 @@ fn exemplar_from(crops: &[[Array2<f64>; 3]]) -> Option<Exemplar> {
     let chroma: Vec<Vec<f64>> = crops
         .iter()
         .map(|[_, a, b]| {
-            let mean = |p| ExemplarChroma::block_means(p, step);
+            let mean = |p| geometry::downsample(p, step);
             mean(a).iter().chain(mean(b).iter()).copied().collect()
         })
         .collect();

@@ -31,16 +31,15 @@ fn transform(data: &mut Vec<Complex64>, rows: usize, cols: usize, inverse: bool)
 
 /// Forward 2D DFT of a real plane (unnormalised).
 pub(crate) fn forward(real: &Array2<f64>) -> Array2<Complex64> {
-    let (rows, cols) = real.dim();
-    let mut data: Vec<Complex64> = real.iter().map(|&v| Complex64::new(v, 0.0)).collect();
-    transform(&mut data, rows, cols, false);
-    Array2::from_shape_vec((rows, cols), data).expect("rows x cols values")
+    forward_complex(&real.mapv(|v| Complex64::new(v, 0.0)))
 }
 
 /// Forward 2D DFT of a complex plane (unnormalised).
-pub(crate) fn forward_complex(plane: Array2<Complex64>) -> Array2<Complex64> {
+pub(crate) fn forward_complex(plane: &Array2<Complex64>) -> Array2<Complex64> {
     let (rows, cols) = plane.dim();
-    let mut data = plane.into_raw_vec_and_offset().0;
+    // In logical (row-major) order whatever the plane's memory layout (a transposed plane's
+    // raw buffer runs by columns).
+    let mut data: Vec<Complex64> = plane.iter().copied().collect();
     transform(&mut data, rows, cols, false);
     Array2::from_shape_vec((rows, cols), data).expect("rows x cols values")
 }

@@ -73,7 +73,7 @@ pub struct SynthesisCache {
 }
 
 /// An exemplar's basis fields quilted onto the output with one layout, zero mean each.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 struct LaidExemplar {
     /// One per L* basis crop (the mean, then the deviations).
     lightness: Vec<Array2<f64>>,

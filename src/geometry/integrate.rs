@@ -80,8 +80,7 @@ pub fn frankot_chellappa(normals: &Array3<f64>) -> Array2<f64> {
 /// # Panics
 /// Shapes that differ.
 pub fn integrate_on_torus(right: &Array2<f64>, down: &Array2<f64>) -> Array2<f64> {
-    let packed = |d: &Array2<f64>| d.mapv(|v| Complex64::new(v, 0.0));
-    solve_on_torus(packed(right), packed(down), |_| 1.0).mapv(|c| c.re)
+    solve_on_torus(fft::forward(right), fft::forward(down), |_| 1.0).mapv(|c| c.re)
 }
 
 /// [`integrate_on_torus`] less the result's Gaussian blur of standard deviation `sigma`
@@ -96,8 +95,7 @@ pub fn integrate_detail_on_torus(
     down: &Array2<f64>,
     sigma: f64,
 ) -> Array2<f64> {
-    let packed = |d: &Array2<f64>| d.mapv(|v| Complex64::new(v, 0.0));
-    solve_on_torus(packed(right), packed(down), detail_gain(sigma)).mapv(|c| c.re)
+    solve_on_torus(fft::forward(right), fft::forward(down), detail_gain(sigma)).mapv(|c| c.re)
 }
 
 /// [`integrate_detail_on_torus`] of two fields' differences (`(right, down)` each) at once: the
@@ -117,7 +115,11 @@ pub fn integrate_detail_pair_on_torus(
         z.zip_mut_with(im, |z, &v| z.im = v);
         z
     };
-    let z = solve_on_torus(packed(a.0, b.0), packed(a.1, b.1), detail_gain(sigma));
+    let z = solve_on_torus(
+        fft::forward_complex(&packed(a.0, b.0)),
+        fft::forward_complex(&packed(a.1, b.1)),
+        detail_gain(sigma),
+    );
     (z.mapv(|c| c.re), z.mapv(|c| c.im))
 }
 
@@ -127,20 +129,20 @@ fn detail_gain(sigma: f64) -> impl Fn(f64) -> f64 {
     move |f2| 1.0 - (k * f2).exp()
 }
 
-/// The Poisson solve of [`integrate_on_torus`] for complex differences (two real fields at
-/// once), each frequency's result multiplied by `gain(|f|^2)` (`f` in cycles a sample, folded
-/// into -1/2..1/2 on each axis).
+/// The Poisson solve of [`integrate_on_torus`] from the DFTs `fx`, `fy` of the differences to
+/// the right and downward (of one real field, or of two packed as real and imaginary parts),
+/// each frequency's result multiplied by `gain(|f|^2)` (`f` in cycles a sample, folded into
+/// -1/2..1/2 on each axis).
 fn solve_on_torus(
-    right: Array2<Complex64>,
-    down: Array2<Complex64>,
+    fx: Array2<Complex64>,
+    fy: Array2<Complex64>,
     gain: impl Fn(f64) -> f64,
 ) -> Array2<Complex64> {
-    assert_eq!(right.dim(), down.dim(), "difference planes of one shape");
-    let (h, w) = right.dim();
+    assert_eq!(fx.dim(), fy.dim(), "difference planes of one shape");
+    let (h, w) = fx.dim();
     if h == 0 || w == 0 {
         return Array2::zeros((h, w));
     }
-    let (fx, fy) = (fft::forward_complex(right), fft::forward_complex(down));
     let tau = 2.0 * std::f64::consts::PI;
     // Per axis and bin k of n: the DFT of a forward difference, e^(i tau k / n) - 1, and the
     // squared frequency folded into -1/2..1/2 cycles a sample.

@@ -286,22 +286,6 @@ pub struct ExemplarChroma {
 pub const MAX_CHROMA_STEP: usize = 16;
 
 impl ExemplarChroma {
-    /// `plane` averaged over `step` x `step` blocks (the last ones cut by the edge): how a
-    /// crop's chroma is stored.
-    pub fn block_means(plane: &Array2<f64>, step: usize) -> Array2<f64> {
-        let (rows, cols) = plane.dim();
-        let step = step.max(1);
-        Array2::from_shape_fn((rows.div_ceil(step), cols.div_ceil(step)), |(y, x)| {
-            plane
-                .slice(ndarray::s![
-                    y * step..((y + 1) * step).min(rows),
-                    x * step..((x + 1) * step).min(cols)
-                ])
-                .mean()
-                .unwrap_or(0.0)
-        })
-    }
-
     /// Basis field `j`'s (a*, b*) planes at the crop's `rows` x `cols` pixels: the block means
     /// interpolated bilinearly between the blocks' centres (held flat beyond the outer ones).
     pub fn crop_planes(&self, j: usize, rows: usize, cols: usize) -> Option<[Array2<f64>; 2]> {
@@ -722,7 +706,7 @@ mod tests {
         // interpolation between centres is exact for it, up to half a block from the edge.
         let (rows, cols, step) = (12, 10, 2);
         let ramp = Array2::from_shape_fn((rows, cols), |(y, x)| 3.0 * y as f64 - 2.0 * x as f64);
-        let means = ExemplarChroma::block_means(&ramp, step);
+        let means = crate::geometry::downsample(&ramp, step);
         assert_eq!(means.dim(), (6, 5));
         assert!((means[(1, 2)] - (3.0 * 2.5 - 2.0 * 4.5)).abs() < 1e-12);
         let chroma = ExemplarChroma {
