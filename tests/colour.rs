@@ -447,6 +447,20 @@ fn band_marginals_round_trip_and_version_1_models_still_read() {
     );
     for (a, b) in model.subspaces().iter().zip(back.subspaces()) {
         assert_eq!(b.kl.space, ColourSpace::Lab);
+        // The chroma-lightness coupling (version 7) comes back to single precision.
+        let coupling = |s: &btfmrf::model::SubspaceModel| {
+            s.colour_marginals
+                .as_ref()
+                .and_then(|c| c.coupling)
+                .unwrap()
+        };
+        for (ca, cb) in coupling(a)
+            .iter()
+            .flatten()
+            .zip(coupling(b).iter().flatten())
+        {
+            assert!((ca - cb).abs() <= 1e-5 * ca.abs().max(1.0), "{ca} vs {cb}");
+        }
         let (ta, tb) = (
             a.band_marginals.as_ref().unwrap(),
             b.band_marginals.as_ref().unwrap(),

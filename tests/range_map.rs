@@ -45,7 +45,14 @@ fn normals_and_heights_of_the_synthetic_materials() {
         let map = estimate_normals(&btf, view, &NoProgress).unwrap();
         let (mean, median) = angular_error(&map.normals, &truth.normals);
         let heights = frankot_chellappa(&map.normals);
-        let corr = correlation(&heights, &truth.height.mapv(f64::from));
+        // A forward-difference slope sits half a texel right of and below its pixel, so the
+        // integrated map is the truth half a texel up and left: the mean of each 2 x 2 block.
+        let t = truth.height.mapv(f64::from);
+        let (h, w) = t.dim();
+        let shifted = Array2::from_shape_fn((h - 1, w - 1), |(y, x)| {
+            (t[[y, x]] + t[[y + 1, x]] + t[[y, x + 1]] + t[[y + 1, x + 1]]) / 4.0
+        });
+        let corr = correlation(&heights.slice(ndarray::s![1.., 1..]).to_owned(), &shifted);
         println!(
             "{material}: normals mean {mean:.1} deg, median {median:.1} deg; height correlation {corr:.3}; {} fallback pixels",
             map.fallback_pixels

@@ -140,6 +140,17 @@ impl MarginalMap {
         map
     }
 
+    /// The piecewise-linear map from the non-decreasing `source` table onto `target` (of one
+    /// length), e.g. from a value to its quantile.
+    pub fn between(source: &[f64], target: &[f64]) -> Self {
+        debug_assert_eq!(source.len(), target.len());
+        Self {
+            source: source.to_vec(),
+            target: target.to_vec(),
+            table: None,
+        }
+    }
+
     /// The mapped value of `v`.
     #[inline]
     pub fn apply(&self, v: f64) -> f64 {

@@ -10,7 +10,7 @@ use super::material::{
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
-use crate::decompose::colour_transfer::{ColourMarginals, DIRECTIONS};
+use crate::decompose::colour_transfer::{ColourMarginals, Coupling, DIRECTIONS, LIGHTNESS_BINS};
 use crate::decompose::marginals::{BAND_QUANTILES, QUANTILES, QuantileGrid};
 use crate::decompose::{ColourSpace, KlBasis};
 use crate::geometry::lattice::Lattice;
@@ -22,9 +22,10 @@ use crate::mrf::{AnyLevels, BandModel, KindVisitor, Levels, LevelsVisitor, Model
 pub const MAGIC: [u8; 4] = *b"BTFM";
 /// The format version this library writes. Version 1 files (no colour space, no band
 /// marginals: linear RGB KL), version 2 files (no joint colour tables) and version 3 files (no
-/// periodic part), version 4 files (one exemplar crop with a gain per subspace) and version 5
-/// files (no exemplar chroma) are still read.
-pub const VERSION: u16 = 6;
+/// periodic part), version 4 files (one exemplar crop with a gain per subspace), version 5
+/// files (no exemplar chroma) and version 6 files (no chroma-lightness coupling) are still
+/// read.
+pub const VERSION: u16 = 7;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -238,6 +239,21 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
         for table in s.colour_marginals.iter().flat_map(|c| &c.tables) {
             write_quantised(w, table, Storage::Double);
         }
+    }
+    // Version 7: the chroma-lightness coupling of every subspace, or a zero flag.
+    let couplings: Option<Vec<&Coupling>> = model
+        .subspaces()
+        .iter()
+        .map(|s| {
+            s.colour_marginals
+                .as_ref()
+                .and_then(|c| c.coupling.as_ref())
+        })
+        .collect::<Option<Vec<_>>>()
+        .filter(|_| with_colours);
+    w.u8(u8::from(couplings.is_some()));
+    for coupling in couplings.into_iter().flatten() {
+        w.f32s(&coupling.concat());
     }
     match model.exemplar() {
         None => w.u8(0),
@@ -638,7 +654,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         read_colour(&mut r, &mut subspaces, usize::from(levels))?;
     }
     let exemplar = if version >= 3 {
-        read_colour_marginals(&mut r, &mut subspaces)?;
+        read_colour_marginals(&mut r, &mut subspaces, version)?;
         read_exemplar(&mut r, subspaces.len(), version)?
     } else {
         None
@@ -748,10 +764,19 @@ fn read_table(r: &mut Reader, count: usize, what: &str) -> Parse<Vec<f64>> {
     Ok(table)
 }
 
-/// Reads the version 3 joint colour tables (see [`write_colour`]) into the subspace models.
-fn read_colour_marginals(r: &mut Reader, subspaces: &mut [SubspaceModel]) -> Parse<()> {
+/// Reads the version 3 joint colour tables and the version 7 chroma-lightness coupling (see
+/// [`write_colour`]) into the subspace models.
+fn read_colour_marginals(
+    r: &mut Reader,
+    subspaces: &mut [SubspaceModel],
+    version: u16,
+) -> Parse<()> {
     let count = usize::from(r.u8()?);
+    let coupled = |r: &mut Reader| -> Parse<bool> {
+        Ok(version >= 7 && r.u8_at_most(usize::from(count > 0), "coupling flag")? == 1)
+    };
     if count == 0 {
+        coupled(r)?;
         return Ok(());
     }
     if count != DIRECTIONS {
@@ -768,7 +793,21 @@ fn read_colour_marginals(r: &mut Reader, subspaces: &mut [SubspaceModel]) -> Par
         let tables = (0..DIRECTIONS)
             .map(|_| read_table(r, BAND_QUANTILES, "colour quantile"))
             .collect::<Parse<Vec<_>>>()?;
-        s.colour_marginals = Some(ColourMarginals { tables });
+        s.colour_marginals = Some(ColourMarginals {
+            tables,
+            coupling: None,
+        });
+    }
+    if coupled(r)? {
+        let values = r.f32s(subspaces.len() * 2 * LIGHTNESS_BINS)?;
+        for (s, v) in subspaces
+            .iter_mut()
+            .zip(values.chunks_exact(2 * LIGHTNESS_BINS))
+        {
+            if let Some(c) = &mut s.colour_marginals {
+                c.coupling = Some(std::array::from_fn(|k| [v[2 * k], v[2 * k + 1]]));
+            }
+        }
     }
     Ok(())
 }

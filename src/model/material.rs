@@ -793,6 +793,7 @@ mod tests {
         let table: Vec<f64> = (0..BAND_QUANTILES).map(|i| i as f64).collect();
         let colours = ColourMarginals {
             tables: vec![table; DIRECTIONS],
+            coupling: None,
         };
         let e = refused(|p| p.subspaces[1].colour_marginals = Some(colours.clone()));
         assert!(e.contains("subspace 1 has colour tables"), "{e}");
