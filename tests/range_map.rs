@@ -46,7 +46,8 @@ fn normals_and_heights_of_the_synthetic_materials() {
         let (mean, median) = angular_error(&map.normals, &truth.normals);
         let heights = frankot_chellappa(&map.normals);
         // A forward-difference slope sits half a texel right of and below its pixel, so the
-        // integrated map is the truth half a texel up and left: the mean of each 2 x 2 block.
+        // integrated map at (y + 1, x + 1) is the truth at (y + 1/2, x + 1/2): the mean of the
+        // 2 x 2 block from (y, x).
         let t = truth.height.mapv(f64::from);
         let (h, w) = t.dim();
         let shifted = Array2::from_shape_fn((h - 1, w - 1), |(y, x)| {

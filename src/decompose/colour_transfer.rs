@@ -146,8 +146,8 @@ impl ColourMarginals {
         let Some(coupling) = &self.coupling else {
             return;
         };
-        let rank = MarginalMap::between(&self.tables[0], &band_probabilities());
         let [first, a, b] = planes;
+        let rank = MarginalMap::between(self.tables[0].clone(), &band_probabilities(), first.len());
         Zip::from(&*first).and(a).and(b).par_for_each(|&l, a, b| {
             let [da, db] = coupling_at(coupling, rank.apply(l));
             *a += da;

@@ -126,29 +126,26 @@ impl MarginalMap {
     /// The map for `plane`'s values onto `target`, the quantiles at `probabilities`.
     pub fn new(plane: &Array2<f64>, target: &[f64], probabilities: &[f64]) -> Self {
         debug_assert_eq!(target.len(), probabilities.len());
+        Self::between(quantiles_at(plane, probabilities), target, plane.len())
+    }
+
+    /// The piecewise-linear map from the non-decreasing `source` table onto `target` (of one
+    /// length; e.g. from a value to its quantile), tabulated when it will map at least
+    /// `4 LUT` values (`uses`, about how many it will).
+    pub fn between(source: Vec<f64>, target: &[f64], uses: usize) -> Self {
+        debug_assert_eq!(source.len(), target.len());
         let mut map = Self {
-            source: quantiles_at(plane, probabilities),
+            source,
             target: target.to_vec(),
             table: None,
         };
         let (lo, hi) = (map.source[0], map.source[map.source.len() - 1]);
-        if hi.partial_cmp(&lo) == Some(std::cmp::Ordering::Greater) && plane.len() >= 4 * LUT {
+        if hi.partial_cmp(&lo) == Some(std::cmp::Ordering::Greater) && uses >= 4 * LUT {
             let step = (hi - lo) / LUT as f64;
             let nodes = (0..=LUT).map(|i| map.exact(lo + step * i as f64)).collect();
             map.table = Some((lo, 1.0 / step, nodes));
         }
         map
-    }
-
-    /// The piecewise-linear map from the non-decreasing `source` table onto `target` (of one
-    /// length), e.g. from a value to its quantile.
-    pub fn between(source: &[f64], target: &[f64]) -> Self {
-        debug_assert_eq!(source.len(), target.len());
-        Self {
-            source: source.to_vec(),
-            target: target.to_vec(),
-            table: None,
-        }
     }
 
     /// The mapped value of `v`.
