@@ -122,6 +122,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 v.judgement.colour_lab
             );
             if verbose {
+                let crop = y.levels().crop.judgement.groups;
+                println!(
+                    "  groups over the crop level ({}): {}",
+                    btfmrf::eval::judge::STRUCTURE_GROUPS.join(", "),
+                    v.judgement
+                        .groups
+                        .iter()
+                        .zip(crop)
+                        .map(|(g, c)| format!("x{:.1}", g / c.max(1e-12)))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                );
                 println!(
                     "  a*, b* fine share: measured {:.3?}, synthesized {:.3?}",
                     fine_share(&measured),

@@ -20,7 +20,7 @@ use crate::geometry::integrate::{Edges, normals_of, normals_of_periodic};
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::relight::{SHADING_FLOOR, shading_factor};
 use crate::geometry::{
-    detail_scale, patch_side, quilt, quilt_laid, resample_periodic, split_detail,
+    Phase, detail_scale, patch_side, quilt, quilt_laid, resample_periodic, split_detail,
 };
 use crate::model::{Exemplar, MaterialModel, ModelError, PeriodicPart, Result};
 use crate::mrf::noise::standard_normal;
@@ -612,7 +612,16 @@ impl MaterialModel {
         }
         let e = self.exemplar()?;
         let seed = crate::mrf::noise::mix(o.seed, EXEMPLAR_SEED);
-        Some(laid_exemplar(&e.crop(0)?, e, o, seed).1)
+        // A near-regular material's exemplar is cut at the lattice's phase origin; its patches
+        // keep their phase, so a thread's fibres stay on the threads the tile lays.
+        let phase = self.periodic().map(|p| {
+            let out = output_lattice(p, o);
+            Phase {
+                output: [out.rows, out.cols],
+                source: [p.lattice.rows, p.lattice.cols],
+            }
+        });
+        Some(laid_exemplar(&e.crop(0)?, e, o, (seed, phase.as_ref())).1)
     }
 
     /// The range map's heights ([`MaterialModel::range_heights`], the same values) and the
@@ -625,7 +634,7 @@ impl MaterialModel {
             return None;
         }
         let seed = crate::mrf::noise::mix(o.seed, RANGE_SEED);
-        Some(laid_exemplar(&map.samples(), e, o, seed))
+        Some(laid_exemplar(&map.samples(), e, o, (seed, None)))
     }
 
     /// The bump strength for `light`: the measured lights' fitted strengths
@@ -681,15 +690,15 @@ fn cropped(field: Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
 const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
 /// `guide` quilted for the output of `o` (on [`quilt_torus`], then cropped) with the
 /// exemplar's basis crops laid by the same patches ([`quilt_laid`]): the guide's quilt and
-/// the crops' zero-mean details.
+/// the crops' zero-mean details; with a phase, every patch keeps the lattice's phase.
 fn laid_exemplar(
     guide: &Array2<f64>,
     e: &Exemplar,
     o: &SynthesisOptions,
-    seed: u64,
+    (seed, phase): (u64, Option<&Phase>),
 ) -> (Array2<f64>, LaidExemplar) {
-    let (tr, tc) = quilt_torus(o, patch_side(e.rows, e.cols));
-    let (guide, details) = quilt_laid(guide, &exemplar_planes(e), tr, tc, seed);
+    let torus = quilt_torus(o, patch_side(e.rows, e.cols));
+    let (guide, details) = quilt_laid(guide, &exemplar_planes(e), torus, seed, phase);
     let mut details = zero_mean(
         details
             .into_iter()

@@ -79,7 +79,20 @@ impl Layout {
 /// # Panics
 /// An empty source or a zero output size (callers check both).
 pub fn quilt(source: &Array2<f64>, rows: usize, cols: usize, seed: u64) -> Array2<f64> {
-    quilt_patches(source, &[], rows, cols, seed).0
+    quilt_patches(source, &[], rows, cols, seed, None).0
+}
+
+/// A lattice the quilt keeps in step (near-regular materials, Haindl and Hatka): its periods
+/// (rows, cols), pixels, on the output torus and in the source, both with phase 0 at sample
+/// (0, 0). A patch placed at torus position r then comes from a source offset at the same phase
+/// (to half a pixel), so detail tied to the lattice (a thread's fibres, a brick's texture)
+/// stays on the lattice cells it belongs to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Phase {
+    /// Periods (rows, cols) on the output torus, pixels.
+    pub output: [f64; 2],
+    /// Periods (rows, cols) in the source, pixels.
+    pub source: [f64; 2],
 }
 
 /// The side (samples) of the square patches [`quilt`] cuts from a `rows` x `cols` source.
@@ -108,14 +121,16 @@ pub fn split_detail(field: &Array2<f64>, sigma: f64, wrap: bool) -> (Array2<f64>
 /// quilt per companion. A companion's quilt is linear in the companion up to its mean: the
 /// quilt of a weighted sum is the weighted sum of the quilts plus a constant.
 ///
+/// With `phase`, every patch keeps the lattice's phase ([`Phase`]).
+///
 /// # Panics
 /// A companion's shape differs from the source's, an empty source or a zero output size.
 pub fn quilt_laid(
     source: &Array2<f64>,
     companions: &[Array2<f64>],
-    rows: usize,
-    cols: usize,
+    (rows, cols): (usize, usize),
     seed: u64,
+    phase: Option<&Phase>,
 ) -> (Array2<f64>, Vec<Array2<f64>>) {
     assert!(
         companions.iter().all(|c| c.dim() == source.dim()),
@@ -128,7 +143,7 @@ pub fn quilt_laid(
         .filter(|&c| c != source)
         .cloned()
         .collect();
-    let (heights, _, laid) = quilt_patches(source, &other, rows, cols, seed);
+    let (heights, _, laid) = quilt_patches(source, &other, rows, cols, seed, phase);
     let mut laid = laid.into_iter();
     let laid = companions
         .iter()
@@ -151,6 +166,7 @@ fn quilt_patches(
     rows: usize,
     cols: usize,
     seed: u64,
+    phase: Option<&Phase>,
 ) -> (Array2<f64>, Array2<u32>, Vec<Array2<f64>>) {
     let (sr, sc) = source.dim();
     assert!(sr > 0 && sc > 0 && rows > 0 && cols > 0, "empty quilt");
@@ -195,7 +211,14 @@ fn quilt_patches(
                     filled[p].then(|| (y, x, out[p]))
                 })
                 .collect();
-            let (y0, x0, lift) = choose(source, hr, hc, &known, &mut rng);
+            // Patches keep the phase of their unwrapped position (the first one starts an
+            // overlap before the origin), so the output from its origin is in step.
+            let offsets =
+                [(&lr, i, hr, sr, 0), (&lc, j, hc, sc, 1)].map(|(layout, k, len, side, axis)| {
+                    let start = layout.starts[k] as f64 - layout.overlap as f64;
+                    candidate_offsets(side, len, phase.map(|p| (start, p, axis)))
+                });
+            let (y0, x0, lift) = choose(source, (hr, hc), &offsets, &known, &mut rng);
             let src = |y: usize, x: usize| source[((y0 + y) % sr, (x0 + x) % sc)] + lift;
             let error = Array2::from_shape_fn((hr, hc), |(y, x)| {
                 let p = at(y, x);
@@ -332,6 +355,34 @@ fn gaussian_blur(field: &Array2<f64>, sigma: f64, wrap: bool) -> Array2<f64> {
     }
 }
 
+/// The source offsets along one axis a patch of `len` samples may come from, in a source of
+/// `side` samples: every offset that keeps the patch inside the source (or every sample, when
+/// the source is shorter than a patch), at most [`CANDIDATES_PER_AXIS`] of them spread evenly.
+/// With `phase` = (the patch's first torus position, the lattice, the axis: 0 rows, 1 cols), only
+/// the offsets at the same lattice phase, rounded to the nearest sample; all of them when none
+/// fits (a source shorter than a period and a patch).
+fn candidate_offsets(side: usize, len: usize, phase: Option<(f64, &Phase, usize)>) -> Vec<usize> {
+    let count = if len <= side { side - len + 1 } else { side };
+    let all = || {
+        let stride = count.div_ceil(CANDIDATES_PER_AXIS);
+        (0..count).step_by(stride).collect()
+    };
+    let Some((start, lattice, axis)) = phase else {
+        return all();
+    };
+    let (output, source) = (lattice.output[axis], lattice.source[axis]);
+    if !(output > 0.0 && source > 0.0 && output.is_finite() && source.is_finite()) {
+        return all();
+    }
+    let at = (start / output).rem_euclid(1.0);
+    let in_step: Vec<usize> = (0..)
+        .map(|k| ((at + f64::from(k)) * source).round())
+        .take_while(|&y| y < count as f64)
+        .map(|y| y as usize)
+        .collect();
+    if in_step.is_empty() { all() } else { in_step }
+}
+
 /// The source offset of the next patch and the height it is lifted by: uniformly among the
 /// candidates whose squared error against the `known` output samples (patch row, column,
 /// value), after the best lift (the mean difference), is within [`TOLERANCE`] of the best.
@@ -341,18 +392,12 @@ fn gaussian_blur(field: &Array2<f64>, sigma: f64, wrap: bool) -> Array2<f64> {
 /// scored on all of them.
 fn choose(
     source: &Array2<f64>,
-    hr: usize,
-    hc: usize,
+    (hr, hc): (usize, usize),
+    [ys, xs]: &[Vec<usize>; 2],
     known: &[(usize, usize, f64)],
     rng: &mut Xoshiro256PlusPlus,
 ) -> (usize, usize, f64) {
     let (sr, sc) = source.dim();
-    let offsets = |s: usize, h: usize| -> Vec<usize> {
-        let count = if h <= s { s - h + 1 } else { s };
-        let stride = count.div_ceil(CANDIDATES_PER_AXIS);
-        (0..count).step_by(stride).collect()
-    };
-    let (ys, xs) = (offsets(sr, hr), offsets(sc, hc));
     let candidates: Vec<(usize, usize)> = ys
         .iter()
         .flat_map(|&y| xs.iter().map(move |&x| (y, x)))
@@ -597,7 +642,7 @@ mod tests {
     #[test]
     fn cuts_are_as_smooth_as_the_interior() {
         let source = ridges(100, 100, 1);
-        let (heights, patch, _) = quilt_patches(&source, &[], 240, 200, 7);
+        let (heights, patch, _) = quilt_patches(&source, &[], 240, 200, 7, None);
         let (same, cut) = neighbour_steps(&Quilt { heights, patch });
         println!("neighbour step: within patches {same:.4}, across cuts {cut:.4}");
         assert!(cut < 2.5 * same, "cut {cut} vs interior {same}");
@@ -712,7 +757,7 @@ mod tests {
             let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
             let source = ridges(43, 64, 10 + seed)
                 + Array2::from_shape_fn((43, 64), |_| rng.random_range(-0.5..0.5));
-            let (q, patch, _) = quilt_patches(&source, &[], 256, 256, seed);
+            let (q, patch, _) = quilt_patches(&source, &[], 256, 256, seed, None);
             let (same, _) = neighbour_steps(&Quilt {
                 heights: q.clone(),
                 patch: patch.clone(),
@@ -753,7 +798,13 @@ mod tests {
         let companion = source.mapv(|v| 3.0 - 2.0 * v);
         let other = ridges(60, 70, 12);
         let mix = &other * 0.5 - &companion * 2.0;
-        let (heights, laid) = quilt_laid(&source, &[companion, other.clone(), mix], 150, 130, 4);
+        let (heights, laid) = quilt_laid(
+            &source,
+            &[companion, other.clone(), mix],
+            (150, 130),
+            4,
+            None,
+        );
         assert_eq!(heights, alone);
         for (a, b) in laid[0].iter().zip(&alone) {
             assert!(
@@ -767,7 +818,7 @@ mod tests {
         assert_ne!(laid[1], quilt(&other, 150, 130, 4));
         assert_eq!(laid[1].dim(), (150, 130));
         // The source as its own companion is its quilt.
-        let (_, own) = quilt_laid(&source, std::slice::from_ref(&source), 150, 130, 4);
+        let (_, own) = quilt_laid(&source, std::slice::from_ref(&source), (150, 130), 4, None);
         assert_eq!(own[0], alone);
         // Linear up to the mean: a weighted sum's quilt is the weighted sum of the quilts (to
         // the single precision of the source's blur).
@@ -777,6 +828,69 @@ mod tests {
         for (a, b) in laid[2].iter().zip(&summed) {
             assert!((a - b - shift).abs() < tolerance, "{a} vs {b} + {shift}");
         }
+    }
+
+    #[test]
+    fn a_phase_keeps_the_lattice_in_step() {
+        use crate::geometry::lattice::{Lattice, mean_tile};
+        // A lattice of sub-pixel periods with an asymmetric cell (a bright corner dot and a
+        // ramp), under stochastic ridges: laid in phase, the quilt's mean cell is the source's;
+        // laid freely, its cells land at random phases and their mean is unrelated.
+        let lattice = Lattice {
+            rows: 13.4,
+            cols: 11.7,
+        };
+        let cell = |y: f64, x: f64| {
+            let (u, v) = ((y / lattice.rows).fract(), (x / lattice.cols).fract());
+            4.0 * (-((u - 0.3).powi(2) + (v - 0.2).powi(2)) / 0.01).exp() + 2.0 * v
+        };
+        let noise = ridges(96, 90, 5);
+        let source = Array2::from_shape_fn((96, 90), |(y, x)| {
+            cell(y as f64, x as f64) + 0.3 * noise[(y, x)]
+        });
+        let phase = Phase {
+            output: [lattice.rows, lattice.cols],
+            source: [lattice.rows, lattice.cols],
+        };
+        let measured = mean_tile(&source, &lattice, [13, 12]);
+        let correlation = |laid: &Array2<f64>| {
+            let tile = mean_tile(laid, &lattice, [13, 12]);
+            let (a, b) = (
+                &measured - measured.mean().unwrap(),
+                &tile - tile.mean().unwrap(),
+            );
+            (&a * &b).sum() / ((&a * &a).sum() * (&b * &b).sum()).sqrt()
+        };
+        for seed in 0..3 {
+            let (free, _) = quilt_laid(&source, &[], (150, 130), seed, None);
+            let (locked, _) = quilt_laid(&source, &[], (150, 130), seed, Some(&phase));
+            let (free, locked) = (correlation(&free), correlation(&locked));
+            assert!(locked > 0.95, "seed {seed}: in phase {locked:.3}");
+            assert!(free < 0.8, "seed {seed}: free {free:.3}");
+        }
+    }
+
+    #[test]
+    fn phase_candidates_sit_at_the_patch_phase() {
+        let phase = Phase {
+            output: [10.0, 10.0],
+            source: [12.5, 12.5],
+        };
+        // A patch starting 3 pixels into an output period: 0.3 of a source period, then whole
+        // periods, rounded, while the patch fits the source.
+        assert_eq!(
+            candidate_offsets(60, 20, Some((3.0, &phase, 0))),
+            vec![4, 16, 29]
+        );
+        // The first patch starts an overlap before the origin: phase 0.8.
+        assert_eq!(
+            candidate_offsets(60, 20, Some((-2.0, &phase, 1))),
+            vec![10, 23, 35]
+        );
+        // A source too short for a patch at that phase keeps every offset.
+        assert_eq!(candidate_offsets(24, 20, Some((6.0, &phase, 0))).len(), 5);
+        // Without a phase: every offset, thinned to the per-axis limit.
+        assert_eq!(candidate_offsets(60, 20, None).len(), 41);
     }
 
     #[test]
