@@ -408,22 +408,41 @@ pub fn analyze(
         .collect::<Result<_>>()?;
     progress.finish();
     // A preferred (de-shaded frontal) representative whose synthesis leaves the measured
-    // chromaticities gives way to its cluster's nearest member: dividing a grazing light's
-    // shading out can leave a texture whose independent colour factors combine into specks
-    // of a colour the material never shows (the leather at 75 degrees).
-    let unfit = off_chroma_subspaces(
-        btf,
-        &clustering,
-        &fitted,
-        (range_map.as_ref(), periodic.as_ref()),
-    )?;
-    let refitted = unfit
-        .par_iter()
-        .map(|&k| fit(k, clustering.fallbacks[k]))
-        .collect::<Result<Vec<_>>>()?;
-    for (k, f) in unfit.into_iter().zip(refitted) {
-        clustering.representatives[k] = clustering.fallbacks[k];
-        fitted[k] = f;
+    // chromaticities gives way to its cluster's nearest member where that member's synthesis
+    // leaves them less: dividing a grazing light's shading out can leave a texture whose
+    // independent colour factors combine into specks of a colour the material never shows
+    // (the leather at 75 degrees); on the knit the oblique members were as far off and
+    // worse in structure.
+    let parts = (range_map.as_ref(), periodic.as_ref());
+    let limit = crate::eval::artefacts::Detector::Chroma.limit(0.0);
+    let preferred_shares = off_chroma_shares(btf, &clustering, &fitted, parts)?;
+    let unfit: Vec<usize> = preferred_shares
+        .iter()
+        .filter(|&&(_, share)| share > limit)
+        .map(|&(k, _)| k)
+        .collect();
+    if !unfit.is_empty() {
+        let refitted = unfit
+            .par_iter()
+            .map(|&k| fit(k, clustering.fallbacks[k]))
+            .collect::<Result<Vec<_>>>()?;
+        let mut trial = fitted.clone();
+        for (&k, f) in unfit.iter().zip(refitted) {
+            trial[k] = f;
+        }
+        let fallback_shares = off_chroma_shares(btf, &clustering, &trial, parts)?;
+        for &k in &unfit {
+            let share_of = |shares: &[(usize, f64)]| {
+                shares
+                    .iter()
+                    .find(|&&(j, _)| j == k)
+                    .map_or(f64::INFINITY, |&(_, s)| s)
+            };
+            if share_of(&fallback_shares) < share_of(&preferred_shares) {
+                clustering.representatives[k] = clustering.fallbacks[k];
+                fitted[k] = trial[k].clone();
+            }
+        }
     }
     let mut subspaces = Vec::with_capacity(fitted.len());
     let mut shares = Vec::with_capacity(fitted.len());
@@ -520,17 +539,17 @@ fn check_options(width: u32, height: u32) -> crate::synthesis::SynthesisOptions 
     }
 }
 
-/// The subspaces whose representative is a preferred image with a fallback (a member not
-/// preferred) and whose synthesis (seed 1, at most [`CHECK_SIDE`] a side), relit for any of the
-/// cluster's members in the representative's view, has more pixels outside the
-/// chromaticities of that view than the artefact sweep allows
-/// ([`crate::eval::artefacts::Detector::Chroma`]).
-fn off_chroma_subspaces(
+/// For each subspace whose representative is a preferred image with a fallback (a member not
+/// preferred), the largest share of pixels outside the chromaticities of the representatives'
+/// view ([`crate::eval::artefacts::ChromaSupport`]) in the synthesis of the `fitted` models
+/// (seed 1, at most [`CHECK_SIDE`] a side) relit for any of the cluster's members in that view;
+/// the artefact sweep's limit is [`crate::eval::artefacts::Detector::Chroma`]'s.
+fn off_chroma_shares(
     btf: &Btf,
     clustering: &SubspaceClustering,
     fitted: &[Fitted],
     (range_map, periodic): (Option<&RangeMap>, Option<&PeriodicPart>),
-) -> Result<Vec<usize>> {
+) -> Result<Vec<(usize, f64)>> {
     let preferred: Vec<usize> = (0..fitted.len())
         .filter(|&k| clustering.representatives[k] != clustering.fallbacks[k])
         .collect();
@@ -545,7 +564,6 @@ fn off_chroma_subspaces(
         .map(|l| btf.image(view, l))
         .collect::<std::result::Result<Vec<_>, _>>()?;
     let support = crate::eval::artefacts::ChromaSupport::new(&images);
-    let limit = crate::eval::artefacts::Detector::Chroma.limit(0.0);
     let probe = MaterialModel::new(MaterialParts {
         views: btf.views().clone(),
         lights: btf.lights().clone(),
@@ -578,15 +596,15 @@ fn off_chroma_subspaces(
             None => Ok(0.0),
         })
         .collect::<Result<Vec<f64>>>()?;
-    let mut unfit: Vec<usize> = checked
-        .into_iter()
-        .zip(shares)
-        .filter(|&(_, share)| share > limit)
-        .map(|((_, k), _)| k)
-        .collect();
-    unfit.sort_unstable();
-    unfit.dedup();
-    Ok(unfit)
+    let mut worst: Vec<(usize, f64)> = Vec::new();
+    for ((_, k), share) in checked.into_iter().zip(shares) {
+        match worst.iter_mut().find(|(j, _)| *j == k) {
+            Some((_, w)) => *w = w.max(share),
+            None => worst.push((k, share)),
+        }
+    }
+    worst.sort_by_key(|&(k, _)| k);
+    Ok(worst)
 }
 
 /// Which images (view-major) make the better subspace representatives: those of the view the
@@ -594,7 +612,7 @@ fn off_chroma_subspaces(
 /// whose relief shading analysis divides out (an oblique representative keeps its shading,
 /// and synthesis applies it again: on the built-in materials at 20 clusters the texture judge's
 /// structure distance was 1.03-2.6x larger). Analysis still gives one up whose synthesis goes off-chroma
-/// ([`off_chroma_subspaces`]).
+/// ([`off_chroma_shares`]).
 fn deshadable(btf: &Btf, frontal: usize, map: &RangeMap, heights: &Array2<f64>) -> Vec<bool> {
     let lights = btf.lights().len();
     let lit: Vec<bool> = (0..lights)
