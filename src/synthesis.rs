@@ -621,7 +621,14 @@ impl MaterialModel {
                 source: [p.lattice.rows, p.lattice.cols],
             }
         });
-        Some(laid_exemplar(&e.crop(0)?, e, o, (seed, phase.as_ref())).1)
+        // In phase the cuts matter little (few candidates fit a patch's phase): the mean crop
+        // guides, and being one of the laid planes it is integrated once, not twice.
+        let guide = if phase.is_some() {
+            e.plane(0)?
+        } else {
+            e.crop(0)?
+        };
+        Some(laid_exemplar(&guide, e, o, (seed, phase.as_ref())).1)
     }
 
     /// The range map's heights ([`MaterialModel::range_heights`], the same values) and the
