@@ -359,8 +359,9 @@ fn gaussian_blur(field: &Array2<f64>, sigma: f64, wrap: bool) -> Array2<f64> {
 /// `side` samples: every offset that keeps the patch inside the source (or every sample, when
 /// the source is shorter than a patch), at most [`CANDIDATES_PER_AXIS`] of them spread evenly.
 /// With `phase` = (the patch's first torus position, the lattice, the axis: 0 rows, 1 cols), only
-/// the offsets at the same lattice phase, rounded to the nearest sample; all of them when none
-/// fits (a source shorter than a period and a patch).
+/// the offsets at the same lattice phase, rounded to the nearest sample (thinned to the same
+/// limit: a short period in a long source); all of them when none fits (a source shorter than
+/// a period and a patch).
 fn candidate_offsets(side: usize, len: usize, phase: Option<(f64, &Phase, usize)>) -> Vec<usize> {
     let count = if len <= side { side - len + 1 } else { side };
     let all = || {
@@ -380,7 +381,11 @@ fn candidate_offsets(side: usize, len: usize, phase: Option<(f64, &Phase, usize)
         .take_while(|&y| y < count as f64)
         .map(|y| y as usize)
         .collect();
-    if in_step.is_empty() { all() } else { in_step }
+    if in_step.is_empty() {
+        return all();
+    }
+    let stride = in_step.len().div_ceil(CANDIDATES_PER_AXIS);
+    in_step.into_iter().step_by(stride).collect()
 }
 
 /// The source offset of the next patch and the height it is lifted by: uniformly among the
@@ -891,6 +896,14 @@ mod tests {
         assert_eq!(candidate_offsets(24, 20, Some((6.0, &phase, 0))).len(), 5);
         // Without a phase: every offset, thinned to the per-axis limit.
         assert_eq!(candidate_offsets(60, 20, None).len(), 41);
+        // A short period in a long source: the phase's offsets, thinned to the same limit.
+        let short = Phase {
+            output: [4.0, 4.0],
+            source: [4.0, 4.0],
+        };
+        let thinned = candidate_offsets(1000, 20, Some((0.0, &short, 0)));
+        assert!(thinned.len() <= CANDIDATES_PER_AXIS, "{}", thinned.len());
+        assert!(thinned.iter().all(|y| y % 4 == 0), "{thinned:?}");
     }
 
     #[test]
