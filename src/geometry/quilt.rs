@@ -376,11 +376,14 @@ fn candidate_offsets(side: usize, len: usize, phase: Option<(f64, &Phase, usize)
         return all();
     }
     let at = (start / output).rem_euclid(1.0);
-    let in_step: Vec<usize> = (0..)
-        .map(|k| ((at + f64::from(k)) * source).round())
+    // At most `count` periods fit (periods of at least a sample); bounded even for a period
+    // below one, which repeats offsets rather than looping.
+    let mut in_step: Vec<usize> = (0..count)
+        .map(|k| ((at + k as f64) * source).round())
         .take_while(|&y| y < count as f64)
         .map(|y| y as usize)
         .collect();
+    in_step.dedup();
     if in_step.is_empty() {
         return all();
     }
@@ -904,6 +907,13 @@ mod tests {
         let thinned = candidate_offsets(1000, 20, Some((0.0, &short, 0)));
         assert!(thinned.len() <= CANDIDATES_PER_AXIS, "{}", thinned.len());
         assert!(thinned.iter().all(|y| y % 4 == 0), "{thinned:?}");
+        // A period below a sample (no lattice a file can hold) ends, with distinct offsets.
+        let tiny = Phase {
+            output: [1e-9, 1.0],
+            source: [1e-9, 1.0],
+        };
+        let offsets = candidate_offsets(60, 20, Some((3.0, &tiny, 0)));
+        assert_eq!(offsets, vec![0]);
     }
 
     #[test]
