@@ -8,7 +8,7 @@
 //! row above synthesized row, the nine lights left to right).
 //!
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
-//! [--model KIND] [--no-colour-tables] [--verbose] [--sheet DIR]`; `--verbose` adds each
+//! [--model KIND] [--no-colour-tables] [--no-lit-tables] [--verbose] [--sheet DIR]`; `--verbose` adds each
 //! light's subspace and its representative, and the share of the a* and b* variance in
 //! neighbour differences (near 0: colour constant over regions; 1: white noise).
 
@@ -59,6 +59,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--clusters" => options.clusters = args.next().ok_or("--clusters N")?.parse()?,
             "--model" => options.kind = args.next().ok_or("--model KIND")?.parse()?,
             "--no-colour-tables" => options.colour_matching = false,
+            "--no-lit-tables" => options.lit_matching = false,
             "--verbose" => verbose = true,
             "--sheet" => sheet = Some(args.next().ok_or("--sheet DIR")?.into()),
             m => materials.push(m.parse::<SyntheticMaterial>()?),
@@ -135,6 +136,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         .join(" ")
                 );
                 println!(
+                    "  colour L*, a*, b*: {:.2?} (another crop {:.2?})",
+                    v.judgement.colour_lab_channels,
+                    y.levels().crop.judgement.colour_lab_channels
+                );
+                println!(
                     "  a*, b* fine share: measured {:.3?}, synthesized {:.3?}",
                     fine_share(&measured),
                     fine_share(&image)
@@ -148,10 +154,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let n = LIGHTS.len() as f64;
         use btfmrf::model::format;
         println!(
-            "{material} {kind} ({} bytes: exemplar {}, colour tables {}, periodic {}, range map {}): x{:.2} the crop level (geometric mean), {:.2} Lab",
+            "{material} {kind} ({} bytes: exemplar {}, colour tables {}, lit tables {}, periodic {}, range map {}): x{:.2} the crop level (geometric mean), {:.2} Lab",
             format::to_bytes(&model).len(),
             format::exemplar_bytes(&model),
             format::colour_marginal_bytes(&model),
+            format::lit_marginal_bytes(&model),
             format::periodic_bytes(&model),
             model.range_map().map_or(0, |m| 2 * m.rows * m.cols),
             (log_ratio / n).exp(),

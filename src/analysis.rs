@@ -17,9 +17,9 @@ use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceCl
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::{self, relight};
 use crate::model::{
-    AnyLevels, BandMarginals, Exemplar, ExemplarChroma, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS,
-    MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, ModelError, ModelKind,
-    PeriodicPart, Principal, RangeMap, Result, SubspaceModel, format,
+    AnyLevels, BandMarginals, Exemplar, ExemplarChroma, LitMarginals, MAX_CHROMA_STEP,
+    MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
+    ModelError, ModelKind, PeriodicPart, Principal, RangeMap, Result, SubspaceModel, format,
 };
 use crate::mrf::{BandModel, KindVisitor, Levels, Repair, neighbourhood::MAX_ORDER};
 use crate::progress::Progress;
@@ -56,6 +56,10 @@ pub struct AnalysisOptions {
     /// subspace image's colours towards them (see [`crate::decompose::colour_transfer`]).
     /// Default: true.
     pub colour_matching: bool,
+    /// Beside a range map, store each representative's measured L* quantiles (74 bytes a
+    /// subspace image) and give the subspace image that lightness marginal once relit for the
+    /// representative's light ([`crate::model::LitMarginals`]). Default: true.
+    pub lit_matching: bool,
     /// Largest side of the structure exemplar (0: none; see [`crate::model::Exemplar`]),
     /// stored when the model works in CIE Lab and has no range map, or has one sampled at
     /// every pixel of a texture no larger than this and the exemplar brings the synthesis
@@ -111,6 +115,7 @@ impl Default for AnalysisOptions {
             colour_space: ColourSpace::Lab,
             band_marginals: false,
             colour_matching: true,
+            lit_matching: true,
             exemplar_side: None,
             periodic: true,
         }
@@ -364,6 +369,13 @@ pub fn analyze(
     let fit = |k: usize, (v, l): (usize, usize)| -> Result<Fitted> {
         let measured = btf.image(v, l)?;
         let share = block_mean_share(&measured);
+        let lit_marginals = (range_map.is_some() && options.lit_matching).then(|| {
+            let probabilities = marginals::band_probabilities();
+            let [lightness, _, _] = ColourSpace::Lab.planes(&measured);
+            LitMarginals {
+                lightness: marginals::quantiles_at(&lightness, &probabilities),
+            }
+        });
         let mut image = deshaded(measured, v, l, all_views);
         if let Some(p) = &periodic {
             divide_by_period(&mut image, p, k);
@@ -390,6 +402,7 @@ pub fn analyze(
         Ok((
             SubspaceModel {
                 representative: (v as u16, l as u16),
+                lit_marginals,
                 ..subspace
             },
             notes,
@@ -1127,6 +1140,7 @@ where
         levels: levels.into(),
         band_marginals,
         colour_marginals,
+        lit_marginals: None,
     };
     (subspace, fits.into_iter().filter_map(|f| f.1).collect())
 }

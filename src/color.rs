@@ -104,6 +104,16 @@ fn lab_f_inv(f: f32) -> f32 {
     }
 }
 
+/// CIE L* of a relative luminance `y` (white 1): [0, 100] for [0, 1].
+pub fn lightness(y: f32) -> f32 {
+    116.0 * lab_f(y / D65_WHITE[1]) - 16.0
+}
+
+/// The relative luminance of CIE lightness `l`, the inverse of [`lightness`].
+pub fn luminance_of_lightness(l: f32) -> f32 {
+    D65_WHITE[1] * lab_f_inv((l + 16.0) / 116.0)
+}
+
 /// CIE XYZ (D65) to CIE L*a*b*: L in [0, 100] for [0, white].
 pub fn xyz_to_lab([x, y, z]: [f32; 3]) -> [f32; 3] {
     let fx = lab_f(x / D65_WHITE[0]);

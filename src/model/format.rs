@@ -4,9 +4,9 @@
 use std::path::Path;
 
 use super::material::{
-    BandMarginals, Exemplar, ExemplarChroma, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS,
-    MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, PeriodicPart, Principal,
-    RangeMap, SubspaceModel,
+    BandMarginals, Exemplar, ExemplarChroma, LitMarginals, MAX_CHROMA_STEP,
+    MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
+    PeriodicPart, Principal, RangeMap, SubspaceModel,
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
@@ -23,9 +23,9 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// The format version this library writes. Version 1 files (no colour space, no band
 /// marginals: linear RGB KL), version 2 files (no joint colour tables) and version 3 files (no
 /// periodic part), version 4 files (one exemplar crop with a gain per subspace), version 5
-/// files (no exemplar chroma) and version 6 files (no chroma-lightness coupling) are still
-/// read.
-pub const VERSION: u16 = 7;
+/// files (no exemplar chroma), version 6 files (no chroma-lightness coupling) and version 7
+/// files (no lit lightness tables) are still read.
+pub const VERSION: u16 = 8;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -149,7 +149,50 @@ pub fn to_payload(model: &MaterialModel) -> Vec<u8> {
     }
     write_colour(&mut w, model);
     write_pair_gains(&mut w, model);
+    write_lit_marginals(&mut w, model);
     w.0
+}
+
+/// The version 8 lit lightness tables ([`LitMarginals`]): a flag, then one table a subspace
+/// (every subspace has one or none does).
+fn write_lit_marginals(w: &mut Writer, model: &MaterialModel) {
+    let tables: Option<Vec<&LitMarginals>> = model
+        .subspaces()
+        .iter()
+        .map(|s| s.lit_marginals.as_ref())
+        .collect();
+    w.u8(u8::from(tables.is_some()));
+    for lit in tables.into_iter().flatten() {
+        write_quantised(w, &lit.lightness, Storage::Double);
+    }
+}
+
+/// Reads what [`write_lit_marginals`] wrote into the subspace models.
+fn read_lit_marginals(r: &mut Reader, subspaces: &mut [SubspaceModel]) -> Parse<()> {
+    if r.u8_at_most(1, "lit table flag")? == 0 {
+        return Ok(());
+    }
+    r.ensure(
+        subspaces.len(),
+        8 + 2 * BAND_QUANTILES,
+        "lit lightness tables",
+    )?;
+    for s in subspaces.iter_mut() {
+        s.lit_marginals = Some(LitMarginals {
+            lightness: read_table(r, BAND_QUANTILES, "lit lightness quantile")?,
+        });
+    }
+    Ok(())
+}
+
+/// Bytes the lit lightness tables take in the file (0 without them).
+pub fn lit_marginal_bytes(model: &MaterialModel) -> usize {
+    let subspaces = model.subspaces();
+    if subspaces.iter().all(|s| s.lit_marginals.is_some()) {
+        subspaces.len() * (8 + 2 * BAND_QUANTILES)
+    } else {
+        0
+    }
 }
 
 /// Codes per octave of a stored pair gain: a step of 2.2 %, finer than a visible brightness
@@ -612,6 +655,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             levels: level_models,
             band_marginals: None,
             colour_marginals: None,
+            lit_marginals: None,
         });
     }
     let range_map = match r.u8()? {
@@ -669,6 +713,9 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     } else {
         Vec::new()
     };
+    if version >= 8 {
+        read_lit_marginals(&mut r, &mut subspaces)?;
+    }
     r.finish()?;
     MaterialModel::new(MaterialParts {
         views,

@@ -48,6 +48,26 @@ pub struct SubspaceModel {
     /// The measured colour marginals along fixed directions, if the model matches the joint
     /// colour distribution (format version 3).
     pub colour_marginals: Option<ColourMarginals>,
+    /// The measured representative's CIE L* quantiles with its relief shading in
+    /// (format version 8), if the model matches the synthesis relit for that light to them
+    /// ([`LitMarginals`]); only beside a range map.
+    pub lit_marginals: Option<LitMarginals>,
+}
+
+/// The lightness marginal of a subspace's representative as measured, relief shading and all:
+/// the de-shaded colour tables fix the subspace image before bump mapping, but the synthesized
+/// relief's shading meets it otherwise than the measured relief met the measured colours, so
+/// the relit synthesis missed the measured L* quantiles by 1-5 Lab units where the
+/// representative's own marginal was 0.0-0.2 away. Synthesis relights the subspace image for
+/// the representative's light and scales each pixel (keeping its chromaticity) so that its L*
+/// takes these quantiles (`crate::synthesis`): exact there, near it at the cluster's other
+/// lights.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LitMarginals {
+    /// L* quantiles at
+    /// [`band_probabilities`](crate::decompose::marginals::band_probabilities),
+    /// non-decreasing.
+    pub lightness: Vec<f64>,
 }
 
 /// The measured marginal distribution of every pyramid band of a subspace image (format
@@ -400,6 +420,10 @@ impl MaterialModel {
             ));
         }
         let coloured = parts.subspaces[0].colour_marginals.is_some();
+        let lit = parts.subspaces[0].lit_marginals.is_some();
+        if lit && parts.range_map.is_none() {
+            return bad("lit lightness tables without a range map to light them".to_string());
+        }
         for (k, s) in parts.subspaces.iter().enumerate() {
             if s.colour_marginals.is_some() != coloured {
                 return bad(format!(
@@ -431,6 +455,22 @@ impl MaterialModel {
             {
                 return bad(format!(
                     "subspace {k}: colour tables are not {DIRECTIONS} non-decreasing tables of {BAND_QUANTILES} finite values"
+                ));
+            }
+            if s.lit_marginals.is_some() != lit {
+                return bad(format!(
+                    "subspace {k} {} a lit lightness table, subspace 0 {}",
+                    if lit { "lacks" } else { "has" },
+                    if lit { "has one" } else { "not" }
+                ));
+            }
+            if let Some(t) = &s.lit_marginals
+                && (t.lightness.len() != BAND_QUANTILES
+                    || t.lightness.iter().any(|v| !v.is_finite())
+                    || t.lightness.windows(2).any(|w| w[1] < w[0]))
+            {
+                return bad(format!(
+                    "subspace {k}: its lit lightness table is not {BAND_QUANTILES} non-decreasing finite values"
                 ));
             }
             if let Some(b) = &s.band_marginals
@@ -664,6 +704,7 @@ mod tests {
             levels: Levels::new(vec![per_level; levels]).unwrap().into(),
             band_marginals: None,
             colour_marginals: None,
+            lit_marginals: None,
         }
     }
 
@@ -804,6 +845,43 @@ mod tests {
             p.subspaces[0].colour_marginals.as_mut().unwrap().tables[3][7] = f64::NAN;
         });
         assert!(e.contains("subspace 0: colour tables are not"), "{e}");
+        let lit = LitMarginals {
+            lightness: (0..BAND_QUANTILES).map(|i| i as f64).collect(),
+        };
+        let e = refused(|p| {
+            for s in &mut p.subspaces {
+                s.lit_marginals = Some(lit.clone());
+            }
+        });
+        assert!(e.contains("without a range map"), "{e}");
+        let e = refused(|p| {
+            p.range_map = Some(RangeMap {
+                heights: vec![0.0; 6],
+                rows: 2,
+                cols: 3,
+                step: 1,
+                strength: Vec::new(),
+            });
+            p.subspaces[1].lit_marginals = Some(lit.clone());
+        });
+        assert!(e.contains("subspace 1 has a lit lightness table"), "{e}");
+        let e = refused(|p| {
+            p.range_map = Some(RangeMap {
+                heights: vec![0.0; 6],
+                rows: 2,
+                cols: 3,
+                step: 1,
+                strength: Vec::new(),
+            });
+            for s in &mut p.subspaces {
+                s.lit_marginals = Some(lit.clone());
+            }
+            p.subspaces[0].lit_marginals.as_mut().unwrap().lightness[3] = 0.5;
+        });
+        assert!(
+            e.contains("subspace 0: its lit lightness table is not"),
+            "{e}"
+        );
         let e = refused(|p| {
             p.exemplar = Some(Exemplar {
                 rows: 2,

@@ -247,9 +247,9 @@ fn cli_analyze_and_synthesize() {
 fn real_rti_sets_analyze_and_synthesize() {
     // (set, kind, file size in KB, fidelity score) as quoted.
     let quoted = [
-        ("loewenkopf", ModelKind::Gmrf, 39.0, 1.06),
-        ("clay-leaf", ModelKind::Car2d, 36.2, 0.91),
-        ("loewenkopf", ModelKind::Car3d, 40.9, 1.17),
+        ("loewenkopf", ModelKind::Gmrf, 39.55, 1.04),
+        ("clay-leaf", ModelKind::Car2d, 36.8, 0.93),
+        ("loewenkopf", ModelKind::Car3d, 41.4, 1.14),
     ];
     let mut misses = Vec::new();
     for (set, kind, kb, score) in quoted {

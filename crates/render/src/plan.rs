@@ -183,6 +183,7 @@ mod tests {
                 .into(),
             band_marginals: None,
             colour_marginals: None,
+            lit_marginals: None,
         };
         MaterialModel::new(MaterialParts {
             views,
