@@ -63,7 +63,7 @@ fn normal_cdf(z: f64) -> f64 {
     0.5 * (1.0 + erf.copysign(z))
 }
 
-/// At most this many samples are sorted to estimate quantiles (a regular subsample).
+/// About this many samples are sorted to estimate quantiles (a regular subsample).
 const MAX_SAMPLES: usize = 16_384;
 
 /// The quantiles of a plane's values (of a regular subsample of at most 16384 of them) at the
@@ -74,9 +74,28 @@ pub fn quantiles(plane: &Array2<f64>, grid: QuantileGrid) -> Quantiles {
         .expect("QUANTILES values")
 }
 
+/// The step between the samples [`quantiles_at`] takes from a plane of `len` values in rows
+/// of `cols`: at least `len / MAX_SAMPLES`, and sharing no factor with `cols`, so the samples
+/// move along the row from one row to the next. A step that divides the row length takes the
+/// same columns in every row: 16 of a 1024^2 knit's, in step with its weave, whose quantiles
+/// then came out of the threads alone (its lit synthesis twice as bright as at 64^2).
+fn sample_step(len: usize, cols: usize) -> usize {
+    let gcd = |mut a: usize, mut b: usize| {
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        a
+    };
+    let mut step = len.div_ceil(MAX_SAMPLES).max(1);
+    while step > 1 && gcd(step, cols.max(1)) != 1 {
+        step += 1;
+    }
+    step
+}
+
 /// The quantiles of a plane's values at `probabilities` (non-decreasing, in [0, 1]).
 pub fn quantiles_at(plane: &Array2<f64>, probabilities: &[f64]) -> Vec<f64> {
-    let stride = plane.len().div_ceil(MAX_SAMPLES).max(1);
+    let stride = sample_step(plane.len(), plane.ncols());
     let mut sample: Vec<f64> = plane
         .iter()
         .step_by(stride)
@@ -185,6 +204,17 @@ const LUT: usize = 4096;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_subsample_takes_every_column_of_a_large_plane() {
+        // One bright column in 64, as a weave's thread edges: a step of 64 on rows of 1024
+        // sampled the bright column alone.
+        let plane = Array2::from_shape_fn((1024, 1024), |(_, x)| f64::from(u8::from(x % 64 == 0)));
+        let q = quantiles_at(&plane, &[0.5, 0.97, 0.99]);
+        assert_eq!(q, vec![0.0, 0.0, 1.0], "{q:?}");
+        assert_eq!(sample_step(1024 * 1024, 1024), 65);
+        assert_eq!(sample_step(100, 10), 1);
+    }
 
     #[test]
     fn matching_transfers_a_bimodal_distribution() {
