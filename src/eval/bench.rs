@@ -207,17 +207,22 @@ pub struct MethodResult {
     pub note: String,
 }
 
-/// The measured (view, light) pairs over which the judge is averaged: `n` pairs spread evenly
-/// over the (view-major) pair index, so they cover frontal to grazing views and many lights.
+/// The measured (view, light) pairs over which the judge is averaged: `n` pairs whose views
+/// are spread evenly over the view list (the middle of each of `n` equal stretches, frontal to
+/// grazing) and whose lights follow the golden-ratio sequence over the light list, so views
+/// and lights vary independently. Spread evenly over the view-major pair index instead, every
+/// pair of the Bonn sampling's 81 x 81 at n = 8 had its light in its view's direction (index
+/// 410 (2i + 1) is view 5 (2i + 1) and light 5 (2i + 1)): the bench judged the hot spot alone,
+/// where nothing shades, and at grazing views its colour distance was 14-18 L* units.
 pub fn fidelity_pairs(btf: &Btf, n: usize) -> Vec<(usize, usize)> {
     let (views, lights) = (btf.views().len(), btf.lights().len());
-    let total = views * lights;
-    let n = n.clamp(1, total.max(1));
+    let n = n.clamp(1, (views * lights).max(1));
+    let golden = (5f64.sqrt() - 1.0) / 2.0;
     (0..n)
         .map(|i| {
-            // The middle of each of n equal stretches, so the set is symmetric in the order.
-            let k = (2 * i + 1) * total / (2 * n);
-            (k / lights, k % lights)
+            let v = ((2 * i + 1) * views / (2 * n)).min(views.saturating_sub(1));
+            let l = (((i as f64 + 0.5) * golden).fract() * lights as f64) as usize;
+            (v, l.min(lights.saturating_sub(1)))
         })
         .collect()
 }
@@ -834,6 +839,22 @@ impl BenchReport {
 mod tests {
     use super::*;
     use crate::eval::judge::Judgement;
+
+    #[test]
+    fn judged_pairs_vary_view_and_light_independently() {
+        let btf = Btf::synthetic(crate::btf::synthetic::SyntheticMaterial::Sponge, 8, 1).unwrap();
+        let pairs = fidelity_pairs(&btf, 8);
+        assert_eq!(pairs.len(), 8);
+        assert!(pairs.iter().all(|&(v, l)| v < 81 && l < 81));
+        // Not the hot spot alone: most pairs light from elsewhere than the view.
+        let hot = pairs.iter().filter(|&&(v, l)| v == l).count();
+        assert!(hot <= 1, "{pairs:?}");
+        // Frontal to grazing views, and as many lights as pairs.
+        let views: std::collections::BTreeSet<_> = pairs.iter().map(|p| p.0).collect();
+        let lights: std::collections::BTreeSet<_> = pairs.iter().map(|p| p.1).collect();
+        assert_eq!((views.len(), lights.len()), (8, 8), "{pairs:?}");
+        assert_eq!(fidelity_pairs(&btf, 8), pairs);
+    }
 
     fn verdict(structure: f64) -> Verdict {
         Verdict {

@@ -36,7 +36,9 @@ pub struct Args {
     /// Side of the image whose synthesis is timed, pixels.
     #[arg(long, default_value_t = 1024)]
     synthesis_size: usize,
-    /// Measured (view, light) pairs over which the judge's figures are averaged.
+    /// Measured (view, light) pairs over which the judge's figures are averaged: views spread
+    /// evenly from frontal to grazing, lights varied independently of them (golden-ratio
+    /// steps through the light list).
     #[arg(long, default_value_t = 8)]
     fidelity_pairs: usize,
     /// Local-PCA settings to run, each CLUSTERSxCOMPONENTS (repeat the option for several).
