@@ -359,14 +359,11 @@ impl MaterialModel {
                 channel.zip_mut_with(&tiled, |v, &t| *v = (f64::from(*v) * t) as f32);
             }
         }
+        let lit_light = usize::from(s.representative.1);
         if let (Some(lit), Some(heights), Some(map)) = (&s.lit_marginals, heights, self.range_map())
-            && let Some(light) = self.lights().get(usize::from(s.representative.1))
-            && let Some(factor) = relief_factor(
-                heights,
-                o.edges(),
-                light,
-                map.strength_of(usize::from(s.representative.1)),
-            )
+            && let Some(light) = self.lights().get(lit_light)
+            && let Some(factor) =
+                relief_factor(heights, o.edges(), light, map.strength_of(lit_light))
         {
             match_lit(&mut image, &factor, lit);
         }

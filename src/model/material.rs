@@ -821,19 +821,19 @@ mod tests {
         assert!(e.contains("0 subspaces"), "{e}");
         let e = refused(|p| p.width = 0);
         assert!(e.contains("image size 0x8"), "{e}");
-        let e = refused(|p| {
-            p.range_map = Some(RangeMap {
-                heights: vec![0.0; 5],
-                rows: 2,
-                cols: 3,
-                step: 1,
-                strength: Vec::new(),
-            })
-        });
+        // A flat 2 x 3 range map of `samples` heights.
+        let flat_map = |samples: usize| RangeMap {
+            heights: vec![0.0; samples],
+            rows: 2,
+            cols: 3,
+            step: 1,
+            strength: Vec::new(),
+        };
+        let e = refused(|p| p.range_map = Some(flat_map(5)));
         assert!(e.contains("range map of 5 samples as 2x3"), "{e}");
         let table: Vec<f64> = (0..BAND_QUANTILES).map(|i| i as f64).collect();
         let colours = ColourMarginals {
-            tables: vec![table; DIRECTIONS],
+            tables: vec![table.clone(); DIRECTIONS],
             coupling: None,
         };
         let e = refused(|p| p.subspaces[1].colour_marginals = Some(colours.clone()));
@@ -846,7 +846,7 @@ mod tests {
         });
         assert!(e.contains("subspace 0: colour tables are not"), "{e}");
         let lit = LitMarginals {
-            lightness: (0..BAND_QUANTILES).map(|i| i as f64).collect(),
+            lightness: table.clone(),
         };
         let e = refused(|p| {
             for s in &mut p.subspaces {
@@ -855,24 +855,12 @@ mod tests {
         });
         assert!(e.contains("without a range map"), "{e}");
         let e = refused(|p| {
-            p.range_map = Some(RangeMap {
-                heights: vec![0.0; 6],
-                rows: 2,
-                cols: 3,
-                step: 1,
-                strength: Vec::new(),
-            });
+            p.range_map = Some(flat_map(6));
             p.subspaces[1].lit_marginals = Some(lit.clone());
         });
         assert!(e.contains("subspace 1 has a lit lightness table"), "{e}");
         let e = refused(|p| {
-            p.range_map = Some(RangeMap {
-                heights: vec![0.0; 6],
-                rows: 2,
-                cols: 3,
-                step: 1,
-                strength: Vec::new(),
-            });
+            p.range_map = Some(flat_map(6));
             for s in &mut p.subspaces {
                 s.lit_marginals = Some(lit.clone());
             }
