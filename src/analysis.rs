@@ -17,9 +17,10 @@ use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceCl
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::{self, relight};
 use crate::model::{
-    AnyLevels, BandMarginals, Exemplar, ExemplarChroma, LitMarginals, MAX_CHROMA_STEP,
-    MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
-    ModelError, ModelKind, PeriodicPart, Principal, RangeMap, Result, SubspaceModel, format,
+    AnyLevels, BandMarginals, DeviationCodes, Exemplar, ExemplarChroma, LitMarginals,
+    MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES,
+    MaterialModel, MaterialParts, ModelError, ModelKind, PeriodicPart, Principal, RangeMap, Result,
+    SubspaceModel, format,
 };
 use crate::mrf::{BandModel, KindVisitor, Levels, Repair, neighbourhood::MAX_ORDER};
 use crate::progress::Progress;
@@ -360,7 +361,7 @@ pub fn analyze(
                 periods: principal(
                     &periods,
                     (MAX_PERIOD_COMPONENTS, PERIOD_RESIDUAL),
-                    format::as_stored,
+                    (format::as_stored, format::as_stored),
                 ),
                 heights: registered.as_ref().map(|h| {
                     let period = lattice::mean_tile(h, &t, samples);
@@ -805,18 +806,22 @@ fn mean_period(image: &Array3<f32>, lattice: &Lattice, samples: [usize; 2]) -> V
         .collect()
 }
 
+/// Values as a model file stores and reads them back (see [`format::as_stored`]).
+type Stored = fn(&[f32]) -> Vec<f32>;
+
 /// Share of the periods' variance around their mean that the stored deviations may leave out.
 const PERIOD_RESIDUAL: f64 = 1e-3;
 
 /// One field per subspace image (`fields`, all of one length) as the model stores them: their
 /// mean and the fewest principal deviations (at most `max_deviations`) that leave at most
 /// `residual` of the variance around the mean, each quantised as the file keeps it
-/// (`stored`), with each field's weights on them (its projections). Principal directions from
-/// the small Gram matrix of the fields.
+/// (`stored`: the mean, the deviations), with each field's weights on them (its projections,
+/// on the deviations as quantised). Principal directions from the small Gram matrix of the
+/// fields.
 fn principal(
     fields: &[Vec<f64>],
     (max_deviations, residual): (usize, f64),
-    stored: fn(&[f32]) -> Vec<f32>,
+    stored: (Stored, Stored),
 ) -> Principal {
     let n = fields.len();
     let len = fields.first().map_or(0, Vec::len);
@@ -857,9 +862,9 @@ fn principal(
         }
         kept.push(direction);
     }
-    let stored = |v: &[f64]| stored(&v.iter().map(|&x| x as f32).collect::<Vec<_>>());
-    let mut basis = vec![stored(&mean)];
-    basis.extend(kept.iter().map(|d| stored(d)));
+    let narrow = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<_>>();
+    let mut basis = vec![stored.0(&narrow(&mean))];
+    basis.extend(kept.iter().map(|d| stored.1(&narrow(d))));
     let wide: Vec<Vec<f64>> = basis[1..]
         .iter()
         .map(|b| b.iter().map(|&v| f64::from(v)).collect())
@@ -935,10 +940,11 @@ fn clamp_log_tails(ratio: Array2<f64>) -> Array2<f64> {
 /// leave out.
 const EXEMPLAR_RESIDUAL: f64 = 0.05;
 
-/// Bytes the exemplar's stored L* crops may take: at a 128 x 128 crop, the mean and three
-/// deviations. Measured (issue 11, sponge, stones and leather at 128^2, 10 clusters, 9
-/// lights): the texture judge's structure distance improved by 4-18 % from two to three
-/// deviations and by 1-6 % more from three to six.
+/// Bytes the exemplar's stored L* crops may take: at a 128 x 128 crop, the mean (8-bit codes)
+/// and six deviations (4-bit codes). Measured (issue 11, 128^2, 20 clusters, nine frontal
+/// lights, 2D CAR, x the another-crop level): three 8-bit deviations in the same bytes gave
+/// sponge x1.81, stones x2.29, leather x1.56; six 4-bit ones x1.78, x2.18, x1.37; eight 4-bit
+/// ones (80 KiB) x1.77, x2.14, x1.35, with the leather's model then over the byte limit.
 const EXEMPLAR_BUDGET: usize = 64 << 10;
 
 /// Bytes the exemplar's chroma may take: a 128 x 128 crop's mean a* and b* at 2 x 2 blocks,
@@ -974,8 +980,9 @@ impl ExemplarBudget {
         chroma: Some(CHROMA_BUDGET),
     };
     /// A near-regular material's exemplar of the grey ratio around its period (its colour
-    /// comes from the period): L* only, the mean and two deviations at a 96 x 96 crop, so the
-    /// model with its period and relief stays within 150 KB. Measured (knit, 128^2, 20
+    /// comes from the period): L* only, the mean and five 4-bit deviations (two at 8 bits before
+    /// format version 9) at a 96 x 96 crop, so the model with its period and relief stays
+    /// within 150 KB. Measured (knit, 128^2, 20
     /// clusters, nine frontal lights, x the another-crop level, before frontal representatives
     /// were kept where their fallbacks are no better): no exemplar x6.25, this x6.09 at
     /// 142.8 KB; a 128 x 128 crop with three deviations x6.18 at 175 KB.
@@ -998,7 +1005,7 @@ impl ExemplarBudget {
 const LATTICE_EXEMPLAR_BUDGET: usize = 32 << 10;
 
 /// Largest side of a near-regular material's exemplar crop: three periods of a 32 px weave.
-/// Its L* mean and two deviations then fit [`LATTICE_EXEMPLAR_BUDGET`].
+/// Its L* mean and five 4-bit deviations then fit [`LATTICE_EXEMPLAR_BUDGET`].
 const LATTICE_EXEMPLAR_SIDE: usize = 96;
 
 /// The structure exemplar from the Lab crops of the subspace images (none without crops):
@@ -1008,12 +1015,12 @@ fn exemplar_from(crops: &[[Array2<f64>; 3]], budget: ExemplarBudget) -> Option<E
     let (rows, cols) = crops.first()?[0].dim();
     let step = chroma_step(rows, cols);
     let (chroma_rows, chroma_cols) = (rows.div_ceil(step), cols.div_ceil(step));
-    // One byte a sample per stored field; the means are always stored.
-    let deviations = |budget: usize, field: usize| {
-        (budget / field.max(1))
-            .saturating_sub(1)
-            .min(MAX_EXEMPLAR_COMPONENTS)
+    // The means are always stored, a byte a sample; then as many deviations as fit, at
+    // `deviation` bytes each.
+    let deviations = |budget: usize, (mean, deviation): (usize, usize)| {
+        (budget.saturating_sub(mean) / deviation.max(1)).min(MAX_EXEMPLAR_COMPONENTS)
     };
+    let field = rows * cols;
     let lightness: Vec<Vec<f64>> = crops
         .iter()
         .map(|c| c[0].iter().copied().collect())
@@ -1033,10 +1040,13 @@ fn exemplar_from(crops: &[[Array2<f64>; 3]], budget: ExemplarBudget) -> Option<E
             fields: principal(
                 &fields,
                 (
-                    deviations(chroma_budget, 2 * chroma_rows * chroma_cols),
+                    deviations(
+                        chroma_budget,
+                        (2 * chroma_rows * chroma_cols, 2 * chroma_rows * chroma_cols),
+                    ),
                     EXEMPLAR_RESIDUAL,
                 ),
-                format::as_stored_bytes,
+                (format::as_stored_bytes, format::as_stored_bytes),
             ),
         }
     });
@@ -1045,9 +1055,13 @@ fn exemplar_from(crops: &[[Array2<f64>; 3]], budget: ExemplarBudget) -> Option<E
         cols,
         lightness: principal(
             &lightness,
-            (deviations(budget.lightness, rows * cols), EXEMPLAR_RESIDUAL),
-            format::as_stored_bytes,
+            (
+                deviations(budget.lightness, (field, field.div_ceil(2))),
+                EXEMPLAR_RESIDUAL,
+            ),
+            (format::as_stored_bytes, format::as_stored_nibbles),
         ),
+        deviation_codes: DeviationCodes::Nibble,
         chroma,
     })
 }
@@ -1219,7 +1233,7 @@ mod tests {
         let p = principal(
             &periods,
             (MAX_PERIOD_COMPONENTS, PERIOD_RESIDUAL),
-            format::as_stored,
+            (format::as_stored, format::as_stored),
         );
         assert_eq!(p.basis.len(), 3, "mean and two deviations");
         assert_eq!(p.weights.len(), 6);
@@ -1233,13 +1247,17 @@ mod tests {
             assert!(worst < 1e-3, "period {k}: {worst}");
         }
         // At most the deviations asked for.
-        let p = principal(&periods, (1, PERIOD_RESIDUAL), format::as_stored);
+        let p = principal(
+            &periods,
+            (1, PERIOD_RESIDUAL),
+            (format::as_stored, format::as_stored),
+        );
         assert_eq!(p.basis.len(), 2);
         // Equal periods need no deviation.
         let p = principal(
             &vec![periods[0].clone(); 4],
             (MAX_PERIOD_COMPONENTS, PERIOD_RESIDUAL),
-            format::as_stored,
+            (format::as_stored, format::as_stored),
         );
         assert_eq!(p.basis.len(), 1);
         assert!(p.weights.iter().all(Vec::is_empty));

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use super::material::{
-    BandMarginals, Exemplar, ExemplarChroma, LitMarginals, MAX_CHROMA_STEP,
+    BandMarginals, DeviationCodes, Exemplar, ExemplarChroma, LitMarginals, MAX_CHROMA_STEP,
     MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
     PeriodicPart, Principal, RangeMap, SubspaceModel,
 };
@@ -23,9 +23,10 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// The format version this library writes. Version 1 files (no colour space, no band
 /// marginals: linear RGB KL), version 2 files (no joint colour tables) and version 3 files (no
 /// periodic part), version 4 files (one exemplar crop with a gain per subspace), version 5
-/// files (no exemplar chroma), version 6 files (no chroma-lightness coupling) and version 7
-/// files (no lit lightness tables) are still read.
-pub const VERSION: u16 = 8;
+/// files (no exemplar chroma), version 6 files (no chroma-lightness coupling), version 7
+/// files (no lit lightness tables) and version 8 files (exemplar L* deviations always 8-bit)
+/// are still read.
+pub const VERSION: u16 = 9;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -304,10 +305,13 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
             w.u8(if e.chroma.is_some() { 2 } else { 1 });
             w.u16(e.rows as u16);
             w.u16(e.cols as u16);
-            write_principal(w, &e.lightness, Storage::Byte);
+            // Version 9: the code width of the L* deviations.
+            let deviations = Storage::of(e.deviation_codes);
+            w.u8(deviations.bits());
+            write_principal(w, &e.lightness, (Storage::Byte, deviations));
             if let Some(c) = &e.chroma {
                 w.u8(c.step as u8);
-                write_principal(w, &c.fields, Storage::Byte);
+                write_principal(w, &c.fields, (Storage::Byte, Storage::Byte));
             }
         }
     }
@@ -325,7 +329,7 @@ fn write_periodic(w: &mut Writer, model: &MaterialModel) {
     w.f32(p.lattice.cols);
     w.u8(p.rows as u8);
     w.u8(p.cols as u8);
-    write_principal(w, &p.periods, Storage::Single);
+    write_principal(w, &p.periods, (Storage::Single, Storage::Single));
     if let Some(h) = &p.heights {
         let values: Vec<f64> = h.iter().map(|&v| f64::from(v)).collect();
         write_quantised(w, &values, Storage::Single);
@@ -333,12 +337,13 @@ fn write_periodic(w: &mut Writer, model: &MaterialModel) {
 }
 
 /// Fields stored as a mean and principal deviations: the number of deviations, each basis
-/// field quantised, then every subspace's weights.
-fn write_principal(w: &mut Writer, p: &Principal, storage: Storage) {
+/// field quantised (the mean as `storage.0`, the deviations as `storage.1`), then every
+/// subspace's weights.
+fn write_principal(w: &mut Writer, p: &Principal, storage: (Storage, Storage)) {
     w.u8((p.basis.len() - 1) as u8);
-    for field in &p.basis {
+    for (j, field) in p.basis.iter().enumerate() {
         let values: Vec<f64> = field.iter().map(|&v| f64::from(v)).collect();
-        write_quantised(w, &values, storage);
+        write_quantised(w, &values, if j == 0 { storage.0 } else { storage.1 });
     }
     for weights in &p.weights {
         for &v in weights {
@@ -348,11 +353,12 @@ fn write_principal(w: &mut Writer, p: &Principal, storage: Storage) {
 }
 
 /// Bytes [`write_principal`] writes for `p`.
-fn principal_bytes(p: &Principal, storage: Storage) -> usize {
+fn principal_bytes(p: &Principal, storage: (Storage, Storage)) -> usize {
     1 + p
         .basis
         .iter()
-        .map(|b| 8 + storage.code_bytes() * b.len())
+        .enumerate()
+        .map(|(j, b)| 8 + if j == 0 { storage.0 } else { storage.1 }.code_bytes(b.len()))
         .sum::<usize>()
         + 4 * p.weights.iter().map(Vec::len).sum::<usize>()
 }
@@ -361,7 +367,7 @@ fn principal_bytes(p: &Principal, storage: Storage) -> usize {
 pub fn periodic_bytes(model: &MaterialModel) -> usize {
     model.periodic().map_or(1, |p| {
         let heights = p.heights.as_ref().map_or(0, |_| 8 + 2 * p.rows * p.cols);
-        11 + principal_bytes(&p.periods, Storage::Single) + heights
+        11 + principal_bytes(&p.periods, (Storage::Single, Storage::Single)) + heights
     })
 }
 
@@ -379,11 +385,11 @@ pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
 /// Bytes the structure exemplar takes in the file (0 without one).
 pub fn exemplar_bytes(model: &MaterialModel) -> usize {
     model.exemplar().map_or(0, |e| {
-        let chroma = e
-            .chroma
-            .as_ref()
-            .map_or(0, |c| 1 + principal_bytes(&c.fields, Storage::Byte));
-        4 + principal_bytes(&e.lightness, Storage::Byte) + chroma
+        let chroma = e.chroma.as_ref().map_or(0, |c| {
+            1 + principal_bytes(&c.fields, (Storage::Byte, Storage::Byte))
+        });
+        let lightness = (Storage::Byte, Storage::of(e.deviation_codes));
+        5 + principal_bytes(&e.lightness, lightness) + chroma
     })
 }
 
@@ -415,38 +421,58 @@ enum Storage {
     /// 8-bit codes, held in single precision (the exemplar's crops: a step of a few tenths of
     /// an L* unit, below what the eye tells apart).
     Byte,
+    /// 4-bit codes, two a byte (the first in the low half), held in single precision (the
+    /// exemplar's L* deviations from version 9).
+    Nibble,
 }
 
 impl Storage {
+    /// How an exemplar's deviations with these codes are stored.
+    fn of(codes: DeviationCodes) -> Self {
+        match codes {
+            DeviationCodes::Byte => Storage::Byte,
+            DeviationCodes::Nibble => Storage::Nibble,
+        }
+    }
+
+    /// Bits of a code (the exemplar's deviation code width as the file names it).
+    fn bits(self) -> u8 {
+        match self {
+            Storage::Single | Storage::Double => 16,
+            Storage::Byte => 8,
+            Storage::Nibble => 4,
+        }
+    }
+
     /// A decoded value as the reader keeps it.
     fn held(self, v: f64) -> f64 {
         match self {
-            Storage::Single | Storage::Byte => f64::from(v as f32),
+            Storage::Single | Storage::Byte | Storage::Nibble => f64::from(v as f32),
             Storage::Double => v,
         }
     }
 
-    /// Bytes a code takes in the file.
-    fn code_bytes(self) -> usize {
+    /// Bytes `count` codes take in the file.
+    fn code_bytes(self, count: usize) -> usize {
         match self {
-            Storage::Single | Storage::Double => 2,
-            Storage::Byte => 1,
+            Storage::Single | Storage::Double => 2 * count,
+            Storage::Byte => count,
+            Storage::Nibble => count.div_ceil(2),
         }
     }
 
     /// The largest code.
     fn top(self) -> u16 {
-        match self {
-            Storage::Single | Storage::Double => u16::MAX,
-            Storage::Byte => u16::from(u8::MAX),
-        }
+        (1u32 << self.bits())
+            .saturating_sub(1)
+            .min(u32::from(u16::MAX)) as u16
     }
 
     /// The smallest step, relative to the largest magnitude in the table, at which every
     /// decoded value re-quantises to its own code: a few of the held precision's units.
     fn resolution(self) -> f64 {
         match self {
-            Storage::Single | Storage::Byte => 2f64.powi(-22),
+            Storage::Single | Storage::Byte | Storage::Nibble => 2f64.powi(-22),
             Storage::Double => 2f64.powi(-36),
         }
     }
@@ -508,6 +534,11 @@ pub fn as_stored_bytes(values: &[f32]) -> Vec<f32> {
     stored_as(values, Storage::Byte)
 }
 
+/// The exemplar's L* deviations as a version 9 file stores (4-bit codes) and reads them back.
+pub fn as_stored_nibbles(values: &[f32]) -> Vec<f32> {
+    stored_as(values, Storage::Nibble)
+}
+
 fn stored_as(values: &[f32], storage: Storage) -> Vec<f32> {
     let wide: Vec<f64> = values.iter().map(|&v| f64::from(v)).collect();
     let (low, step, codes) = quantised_codes(&wide, storage);
@@ -540,16 +571,20 @@ fn quantised_codes(values: &[f64], storage: Storage) -> (f32, f32, Vec<u16>) {
 }
 
 /// Values as `f32` low, `f32` quantum and one code each (see [`quantised_codes`]): `u8`
-/// for [`Storage::Byte`], else `u16`.
+/// for [`Storage::Byte`], two a byte for [`Storage::Nibble`] (an odd count's last high half
+/// zero), else `u16`.
 fn write_quantised(w: &mut Writer, values: &[f64], storage: Storage) {
     let (low, step, codes) = quantised_codes(values, storage);
     w.f32(f64::from(low));
     w.f32(f64::from(step));
-    for code in codes {
-        match storage {
-            Storage::Byte => w.u8(code as u8),
-            Storage::Single | Storage::Double => w.u16(code),
+    match storage {
+        Storage::Byte => codes.iter().for_each(|&c| w.u8(c as u8)),
+        Storage::Nibble => {
+            for pair in codes.chunks(2) {
+                w.u8((pair[0] | pair.get(1).map_or(0, |&c| c << 4)) as u8);
+            }
         }
+        Storage::Single | Storage::Double => codes.iter().for_each(|&c| w.u16(c)),
     }
 }
 
@@ -785,15 +820,27 @@ fn read_quantised(
     what: &str,
 ) -> Parse<(f64, Vec<f64>)> {
     let (lo, quantum) = (r.f32()?, r.f32()?);
-    r.ensure(count, storage.code_bytes(), what)?;
-    let values = (0..count)
-        .map(|_| {
-            let code = match storage {
-                Storage::Byte => u16::from(r.u8()?),
-                Storage::Single | Storage::Double => r.u16()?,
-            };
-            decode(lo, quantum, code, what)
-        })
+    r.ensure(storage.code_bytes(count), 1, what)?;
+    let codes: Vec<u16> = match storage {
+        Storage::Byte => (0..count)
+            .map(|_| r.u8().map(u16::from))
+            .collect::<Parse<_>>()?,
+        Storage::Nibble => {
+            let mut codes = Vec::with_capacity(count + 1);
+            for _ in 0..count.div_ceil(2) {
+                let byte = r.u8()?;
+                codes.extend([u16::from(byte & 0x0f), u16::from(byte >> 4)]);
+            }
+            if codes.len() > count && codes.pop() != Some(0) {
+                return Err(format!("{what}: the last byte's unused half is not zero"));
+            }
+            codes
+        }
+        Storage::Single | Storage::Double => (0..count).map(|_| r.u16()).collect::<Parse<_>>()?,
+    };
+    let values = codes
+        .into_iter()
+        .map(|code| decode(lo, quantum, code, what))
         .collect::<Parse<_>>()?;
     Ok((quantum, values))
 }
@@ -872,12 +919,24 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
             if rows == 0 || cols == 0 {
                 return Err("empty exemplar".into());
             }
+            let deviation_codes = if version >= 9 {
+                match r.u8()? {
+                    8 => DeviationCodes::Byte,
+                    4 => DeviationCodes::Nibble,
+                    b => return Err(format!("exemplar deviations of {b} bits (8 or 4)")),
+                }
+            } else {
+                DeviationCodes::Byte
+            };
             let lightness = if version >= 5 {
                 read_principal(
                     r,
                     rows * cols,
                     clusters,
-                    (MAX_EXEMPLAR_COMPONENTS, Storage::Byte),
+                    (
+                        MAX_EXEMPLAR_COMPONENTS,
+                        (Storage::Byte, Storage::of(deviation_codes)),
+                    ),
                     "exemplar value",
                 )?
             } else {
@@ -900,7 +959,7 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
                     r,
                     2 * chroma_rows * chroma_cols,
                     clusters,
-                    (MAX_EXEMPLAR_COMPONENTS, Storage::Byte),
+                    (MAX_EXEMPLAR_COMPONENTS, (Storage::Byte, Storage::Byte)),
                     "exemplar chroma value",
                 )?;
                 Some(ExemplarChroma {
@@ -916,6 +975,7 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
                 rows,
                 cols,
                 lightness,
+                deviation_codes,
                 chroma,
             }))
         }
@@ -939,7 +999,7 @@ fn read_principal(
     r: &mut Reader,
     len: usize,
     clusters: usize,
-    (max_deviations, storage): (usize, Storage),
+    (max_deviations, (mean, deviation)): (usize, (Storage, Storage)),
     what: &str,
 ) -> Parse<Principal> {
     let deviations = usize::from(r.u8()?);
@@ -949,7 +1009,7 @@ fn read_principal(
         ));
     }
     let basis = (0..=deviations)
-        .map(|_| read_stored(r, len, storage, what))
+        .map(|j| read_stored(r, len, if j == 0 { mean } else { deviation }, what))
         .collect::<Parse<Vec<_>>>()?;
     r.ensure(clusters, 4 * deviations, "principal weights")?;
     let weights = (0..clusters)
@@ -982,7 +1042,7 @@ fn read_periodic(
                 r,
                 3 * rows * cols,
                 clusters,
-                (MAX_PERIOD_COMPONENTS, Storage::Single),
+                (MAX_PERIOD_COMPONENTS, (Storage::Single, Storage::Single)),
                 "periodic tile value",
             )?;
             let heights = if with_heights {
@@ -1102,6 +1162,42 @@ mod tests {
             let relative = (stored / g.clamp(1.0 / 16.0, 15.7)).ln().abs();
             assert!(relative <= 0.011, "{g} -> {stored}");
         }
+    }
+
+    #[test]
+    fn four_bit_codes_pack_two_a_byte_and_read_back_as_stored() {
+        // An odd count: the last byte's high half is padding.
+        let values: Vec<f64> = (0..7).map(|i| f64::from(i * i) - 10.0).collect();
+        let mut w = Writer::default();
+        write_quantised(&mut w, &values, Storage::Nibble);
+        let bytes = w.0;
+        assert_eq!(bytes.len(), 8 + 4, "low, step and four bytes of codes");
+        assert_eq!(bytes[11] >> 4, 0, "padding");
+        let (_, read) = read_quantised(&mut Reader::new(&bytes), 7, Storage::Nibble, "v").unwrap();
+        let narrow: Vec<f32> = values.iter().map(|&v| v as f32).collect();
+        let held: Vec<f32> = read.iter().map(|&v| v as f32).collect();
+        assert_eq!(held, as_stored_nibbles(&narrow), "as analysis keeps them");
+        // 16 levels over the range 36: every value within half a step (1.2) of its own.
+        for (a, b) in values.iter().zip(&read) {
+            assert!((a - b).abs() <= 0.6 * 36.0 / 15.0, "{a} -> {b}");
+        }
+        assert_eq!(read[0], -10.0, "the least value is code 0");
+        assert!(
+            (read[6] - 26.0).abs() < 1e-5,
+            "the greatest is code 15: {}",
+            read[6]
+        );
+        // Written again, the same bytes; a set padding half is refused.
+        let mut again = Writer::default();
+        let held: Vec<f64> = held.into_iter().map(f64::from).collect();
+        write_quantised(&mut again, &held, Storage::Nibble);
+        assert_eq!(again.0, bytes);
+        let mut hostile = bytes.clone();
+        hostile[11] |= 0x30;
+        let e = read_quantised(&mut Reader::new(&hostile), 7, Storage::Nibble, "v").unwrap_err();
+        assert!(e.contains("unused half"), "{e}");
+        // Too few bytes for the codes: an error before anything is read.
+        assert!(read_quantised(&mut Reader::new(&bytes[..11]), 7, Storage::Nibble, "v").is_err());
     }
 
     #[test]
