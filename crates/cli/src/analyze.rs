@@ -109,14 +109,15 @@ pub struct Args {
     #[arg(long)]
     no_lit_matching: bool,
     /// Largest side of the structure exemplar (pixels; 0: none): the L* of a centred crop of
-    /// every subspace image, stored as their mean and up to three principal deviations at a
-    /// byte a pixel each, quilted at synthesis with one layout to carry each subspace image's
+    /// every subspace image, stored as their mean (a byte a pixel) and up to six principal
+    /// deviations (4 bits a pixel), quilted at synthesis with one layout to carry each subspace image's
     /// structure finer than a third of the crop, which second-order MRF models lose (cells,
     /// grains, stones, the shadows of a relief under each light); the MRF keeps the coarser
     /// variation. The crops' a* and b* are stored too, averaged over 2 x 2 pixels (4 x 4 for
     /// a 256 crop; 8 KiB), and laid with the same patches, so each stone or thread keeps its
     /// own colour. Default: 256 for a photograph (one subspace image, one crop of 64 KiB),
-    /// 128 for several subspace images (the mean and up to three deviations, 16 KiB each).
+    /// 128 for several subspace images (the mean, 16 KiB, and up to six deviations, 8 KiB
+    /// each).
     /// Stored when there is no range map (a photograph), and beside a range map sampled at
     /// every pixel of a texture no larger than this (laid with the relief's own patches, so
     /// colour and relief line up) when a check at analysis finds it brings the synthesis
@@ -138,9 +139,9 @@ pub struct Args {
     #[arg(long)]
     no_lattice: bool,
     /// Largest model file in bytes (0: no limit). A model above it drops its exemplar's
-    /// principal deviations, the last first (16 KiB each at a 128 x 128 crop), until it fits,
-    /// and says so; the sponge and leather 3D CAR models at 20 clusters need it (154 KB with
-    /// all three). Its default is the 150 KB the models are held to.
+    /// principal deviations, the last first (8 KiB each at a 128 x 128 crop), until it fits,
+    /// and says so; of the built-in materials at 20 clusters, the leather's 3D CAR model
+    /// needs it (it drops one of six). Its default is the 150 KB the models are held to.
     #[arg(long, default_value_t = btfmrf::analysis::MODEL_BUDGET)]
     max_bytes: usize,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
