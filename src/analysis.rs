@@ -312,7 +312,7 @@ pub fn analyze(
     let wanted = exemplar_side > 0 && options.colour_space == ColourSpace::Lab;
     // With a range map sampled at every pixel (a texture of at most the exemplar's side), the
     // exemplar is the whole image, registered with the map, and synthesis lays it with the
-    // relief's own patches (geometry::quilt_pair), so colour and relief structure line up; a
+    // relief's own patches (geometry::quilt_laid), so colour and relief structure line up; a
     // near-regular material's relief is laid on its lattice instead.
     let registered_whole = lattice.is_none()
         && range_map

@@ -66,13 +66,13 @@ pub struct SynthesisCache {
     subspaces: Vec<OnceLock<Array3<f32>>>,
     heights: Option<Array2<f64>>,
     normals: OnceLock<Option<Array3<f64>>>,
-    /// The exemplar's basis crops quilted with one layout (zero mean each), made on first use;
-    /// `None` without an exemplar.
+    /// The exemplar's basis crops laid with one quilt's patches, made on first use; `None`
+    /// without an exemplar.
     structure: OnceLock<Option<LaidExemplar>>,
     noise: NoiseBank,
 }
 
-/// An exemplar's basis fields quilted onto the output with one layout, zero mean each.
+/// An exemplar's basis fields copied onto the output with one quilt's patches.
 #[derive(Debug)]
 struct LaidExemplar {
     /// One per L* basis crop (the mean, then the deviations).
@@ -318,15 +318,19 @@ impl MaterialModel {
             && let Some(laid) = structure.get_or_init(|| self.exemplar_details(o)).as_ref()
         {
             // The MRF's L* (and a*, b* where the exemplar stores chroma) keeps what is coarser
-            // than the exemplar's patches; this subspace's quilted crop (its weights on the
-            // quilted basis) brings the structure finer.
+            // than the exemplar's patches; this subspace's laid crop (its weights on the laid
+            // basis) brings the structure finer.
             let sigma = detail_scale(e.rows, e.cols);
             let with_detail = |plane: &Array2<f64>, details: Vec<(f64, &Array2<f64>)>| {
-                let (mut coarse, _) = split_detail(plane, sigma, o.tileable);
-                for (c, detail) in details {
-                    coarse.scaled_add(c, detail);
+                let mut laid = Array2::<f64>::zeros(plane.dim());
+                for (c, field) in details {
+                    laid.scaled_add(c, field);
                 }
-                coarse
+                let ((coarse, _), (_, detail)) = rayon::join(
+                    || split_detail(plane, sigma, o.tileable),
+                    || split_detail(&laid, sigma, o.tileable),
+                );
+                coarse + detail
             };
             if let Some(coefficients) = e.lightness.coefficients(k) {
                 colours[0] = with_detail(
@@ -734,7 +738,7 @@ fn cropped(field: Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
 const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
 /// `guide` quilted for the output of `o` (on [`quilt_torus`], then cropped) with the
 /// exemplar's basis crops laid by the same patches ([`quilt_laid`]): the guide's quilt and
-/// the crops' zero-mean details; with a phase, every patch keeps the lattice's phase.
+/// the crops' copies; with a phase, every patch keeps the lattice's phase.
 fn laid_exemplar(
     guide: &Array2<f64>,
     e: &Exemplar,
@@ -743,13 +747,7 @@ fn laid_exemplar(
 ) -> (Array2<f64>, LaidExemplar) {
     let torus = quilt_torus(o, patch_side(e.rows, e.cols));
     let (guide, details) = quilt_laid(guide, &exemplar_planes(e), torus, seed, phase);
-    let mut details = zero_mean(
-        details
-            .into_iter()
-            .map(|d| cropped(d, o.rows, o.cols))
-            .collect(),
-    )
-    .into_iter();
+    let mut details = details.into_iter().map(|d| cropped(d, o.rows, o.cols));
     let lightness = details.by_ref().take(e.lightness.basis.len()).collect();
     let mut chroma = Vec::new();
     while let (Some(a), Some(b)) = (details.next(), details.next()) {
@@ -771,14 +769,6 @@ fn exemplar_planes(e: &Exemplar) -> Vec<Array2<f64>> {
             .flatten()
     });
     lightness.chain(chroma).collect()
-}
-
-/// `fields`, each less its mean.
-fn zero_mean(mut fields: Vec<Array2<f64>>) -> Vec<Array2<f64>> {
-    for f in &mut fields {
-        *f -= f.mean().unwrap_or(0.0);
-    }
-    fields
 }
 
 /// Mixed into the synthesis seed for the exemplar's quilt.

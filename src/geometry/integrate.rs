@@ -86,31 +86,6 @@ pub fn integrate_detail_on_torus(
     solve_on_torus(fft::forward(right), fft::forward(down), detail_gain(sigma)).mapv(|c| c.re)
 }
 
-/// [`integrate_detail_on_torus`] of two fields' differences (`(right, down)` each) at once: the
-/// solve is linear with a real transfer, so the second field rides in the imaginary part of
-/// the first's transforms, for the cost of one.
-///
-/// # Panics
-/// Shapes that differ.
-pub fn integrate_detail_pair_on_torus(
-    a: (&Array2<f64>, &Array2<f64>),
-    b: (&Array2<f64>, &Array2<f64>),
-    sigma: f64,
-) -> (Array2<f64>, Array2<f64>) {
-    assert_eq!(a.0.dim(), b.0.dim(), "difference planes of one shape");
-    let packed = |re: &Array2<f64>, im: &Array2<f64>| {
-        let mut z = re.mapv(|v| Complex64::new(v, 0.0));
-        z.zip_mut_with(im, |z, &v| z.im = v);
-        z
-    };
-    let z = solve_on_torus(
-        fft::forward_complex(&packed(a.0, b.0)),
-        fft::forward_complex(&packed(a.1, b.1)),
-        detail_gain(sigma),
-    );
-    (z.mapv(|c| c.re), z.mapv(|c| c.im))
-}
-
 /// The transfer that keeps the detail finer than a Gaussian of standard deviation `sigma`.
 fn detail_gain(sigma: f64) -> impl Fn(f64) -> f64 {
     let k = -2.0 * std::f64::consts::PI.powi(2) * sigma * sigma;
@@ -301,39 +276,6 @@ mod tests {
             .map(|(y, x)| (spread[[y, (x + 1) % w]] - spread[[y, x]] - right[[y, x]]).abs())
             .fold(0.0, f64::max);
         assert!(worst < 3.0, "{worst}");
-    }
-
-    #[test]
-    fn a_pair_integrates_like_each_field_alone() {
-        let field = |a: f64, b: f64| {
-            Array2::from_shape_fn((24, 30), |(y, x)| {
-                (a * y as f64).sin() + (b * x as f64).cos() + 0.01 * ((y * 31 + x * 17) % 13) as f64
-            })
-        };
-        let steps = |f: &Array2<f64>| {
-            let (h, w) = f.dim();
-            (
-                Array2::from_shape_fn((h, w), |(y, x)| f[(y, (x + 1) % w)] - f[(y, x)]),
-                Array2::from_shape_fn((h, w), |(y, x)| f[((y + 1) % h, x)] - f[(y, x)]),
-            )
-        };
-        let (a, b) = (steps(&field(0.3, 0.7)), steps(&field(1.1, 0.2)));
-        // An inconsistent pair of differences too: a step that no field has.
-        let mut b_right = b.0.clone();
-        b_right[(5, 5)] += 3.0;
-        let (pa, pb) = integrate_detail_pair_on_torus((&a.0, &a.1), (&b_right, &b.1), 4.0);
-        let (sa, sb) = (
-            integrate_detail_on_torus(&a.0, &a.1, 4.0),
-            integrate_detail_on_torus(&b_right, &b.1, 4.0),
-        );
-        for (p, s) in [(pa, sa), (pb, sb)] {
-            let worst = p
-                .iter()
-                .zip(&s)
-                .map(|(x, y)| (x - y).abs())
-                .fold(0.0, f64::max);
-            assert!(worst < 1e-12, "{worst}");
-        }
     }
 
     #[test]

@@ -14,7 +14,7 @@ use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
 
-use super::integrate::{integrate_detail_on_torus, integrate_detail_pair_on_torus};
+use super::integrate::integrate_detail_on_torus;
 
 /// Patch side as a fraction of the source's smaller side (patches much smaller than the
 /// source give many candidates; much larger keep more of each structure intact).
@@ -118,8 +118,12 @@ pub fn split_detail(field: &Array2<f64>, sigma: f64, wrap: bool) -> (Array2<f64>
 /// same shape, e.g. the lightness of the images the relief was measured from) with the very
 /// same patches and cuts, so that structure shared by them (a pit in the relief and its dark
 /// colour) lines up in the output as in the measurement. Returns the source's quilt and one
-/// quilt per companion. A companion's quilt is linear in the companion up to its mean: the
-/// quilt of a weighted sum is the weighted sum of the quilts plus a constant.
+/// copy per companion: each output sample is the companion's sample under the patch that
+/// took it (the companions are copied, not integrated like the source: a copy costs no
+/// solve, and it keeps the companion's own values; measured on the built-in materials, the
+/// measured image quilted this way scored x0.89-1.34 the another-crop level, integrated
+/// x1.56-2.15). A companion's copy is linear in the companion: the copy of a weighted sum is
+/// the weighted sum of the copies.
 ///
 /// With `phase`, every patch keeps the lattice's phase ([`Phase`]).
 ///
@@ -136,25 +140,7 @@ pub fn quilt_laid(
         companions.iter().all(|c| c.dim() == source.dim()),
         "registered companions"
     );
-    // A companion equal to the source (a photograph's one exemplar crop is its own guide) is
-    // the source's quilt: no second integration.
-    let other: Vec<Array2<f64>> = companions
-        .iter()
-        .filter(|&c| c != source)
-        .cloned()
-        .collect();
-    let (heights, _, laid) = quilt_patches(source, &other, rows, cols, seed, phase);
-    let mut laid = laid.into_iter();
-    let laid = companions
-        .iter()
-        .map(|c| {
-            if c == source {
-                heights.clone()
-            } else {
-                laid.next().expect("one quilt per other companion")
-            }
-        })
-        .collect();
+    let (heights, _, laid) = quilt_patches(source, companions, rows, cols, seed, phase);
     (heights, laid)
 }
 
@@ -174,20 +160,6 @@ fn quilt_patches(
     let overlap = (patch / OVERLAP_DIVISOR).max(1);
     let sigma = patch as f64 / 2.0;
     let source = &high_pass(source, sigma, false);
-    let companions: Vec<Array2<f64>> = companions
-        .iter()
-        .map(|c| high_pass(c, sigma, false))
-        .collect();
-    // The companions' differences (to the right, downward), laid like the source's.
-    let mut companion_steps: Vec<Steps> = companions
-        .iter()
-        .map(|_| {
-            (
-                Array2::<f64>::zeros((rows, cols)),
-                Array2::<f64>::zeros((rows, cols)),
-            )
-        })
-        .collect();
     let (lr, lc) = (
         Layout::new(rows, patch.min(sr), overlap),
         Layout::new(cols, patch.min(sc), overlap),
@@ -196,6 +168,8 @@ fn quilt_patches(
     let mut out = Array2::<f64>::zeros((rows, cols));
     let mut filled = Array2::<bool>::from_elem((rows, cols), false);
     let mut label = Array2::<u32>::zeros((rows, cols));
+    // Per patch: its first torus sample (row, column) and its source offset (row, column).
+    let mut placements: Vec<[usize; 4]> = Vec::new();
     // Differences to the right and downward neighbour on the torus, from the patches.
     let mut right = Array2::<f64>::zeros((rows, cols));
     let mut down = Array2::<f64>::zeros((rows, cols));
@@ -230,6 +204,7 @@ fn quilt_patches(
             });
             let taken = take_mask(&error, |y, x| filled[at(y, x)], lr.overlap, lc.overlap);
             let id = (i * lc.patches() + j) as u32;
+            placements.push([r0, c0, y0, x0]);
             for y in 0..hr {
                 for x in 0..hc {
                     let p = at(y, x);
@@ -246,15 +221,6 @@ fn quilt_patches(
                     if y + 1 < hr && (taken[(y, x)] || taken[(y + 1, x)]) {
                         down[p] = src(y + 1, x) - src(y, x);
                     }
-                    for (c, (c_right, c_down)) in companions.iter().zip(&mut companion_steps) {
-                        let at_c = |y: usize, x: usize| c[((y0 + y) % sr, (x0 + x) % sc)];
-                        if x + 1 < hc && (taken[(y, x)] || taken[(y, x + 1)]) {
-                            c_right[p] = at_c(y, x + 1) - at_c(y, x);
-                        }
-                        if y + 1 < hr && (taken[(y, x)] || taken[(y + 1, x)]) {
-                            c_down[p] = at_c(y + 1, x) - at_c(y, x);
-                        }
-                    }
                 }
             }
         }
@@ -263,30 +229,18 @@ fn quilt_patches(
     // cuts could not hide (a patch that fits its last neighbours on three or four sides only
     // roughly) is spread smoothly instead of left as a line of steps. The patches' lifts
     // wander; take out what the result holds above the patch scale, keep the source's mean.
-    // The integrations are independent: in parallel, the source's alone (so its heights do not
-    // depend on the companions, not even in rounding), the companions' two a solve.
+    // The companions are copied from the patches each sample came from (their raw values:
+    // the caller keeps what scale of them it wants).
     let (mut out, laid) = rayon::join(
         || integrate_detail_on_torus(&right, &down, sigma),
         || {
-            let fields: Vec<(&Array2<f64>, Steps)> =
-                companions.iter().zip(companion_steps).collect();
-            fields
-                .par_chunks(2)
-                .flat_map_iter(|pair| {
-                    let integrated = match pair {
-                        [(_, (ra, da)), (_, (rb, db))] => {
-                            let (a, b) = integrate_detail_pair_on_torus((ra, da), (rb, db), sigma);
-                            vec![a, b]
-                        }
-                        _ => pair
-                            .iter()
-                            .map(|(_, (r, d))| integrate_detail_on_torus(r, d, sigma))
-                            .collect(),
-                    };
-                    // Each at its companion's mean.
-                    pair.iter().zip(integrated).map(|((c, _), mut laid)| {
-                        laid += c.mean().unwrap_or(0.0) - laid.mean().unwrap_or(0.0);
-                        laid
+            companions
+                .par_iter()
+                .map(|c| {
+                    Array2::from_shape_fn((rows, cols), |(r, col)| {
+                        let [r0, c0, y0, x0] = placements[label[(r, col)] as usize];
+                        let (y, x) = ((r + rows - r0) % rows, (col + cols - c0) % cols);
+                        c[((y0 + y) % sr, (x0 + x) % sc)]
                     })
                 })
                 .collect::<Vec<_>>()
@@ -295,9 +249,6 @@ fn quilt_patches(
     out += source.mean().unwrap_or(0.0) - out.mean().unwrap_or(0.0);
     (out, label, laid)
 }
-
-/// A field's differences on the torus: to the right neighbour, to the one below.
-type Steps = (Array2<f64>, Array2<f64>);
 
 /// `field` minus its Gaussian blur of standard deviation `sigma` samples (edges repeated, or
 /// wrapped around for a torus), at the field's mean level: the detail finer than about `sigma`.
@@ -800,42 +751,46 @@ mod tests {
     fn companions_are_laid_with_the_sources_own_patches() {
         let source = ridges(60, 70, 11);
         let alone = quilt(&source, 150, 130, 4);
-        // A companion that is an affine copy of the source comes out as the same copy of the
-        // source's quilt (the same patches, cuts and integration), and the source's quilt is
-        // not changed by having companions.
+        // Companions are copied sample by sample from the patches the source's quilt took,
+        // and the source's quilt is not changed by having companions.
         let companion = source.mapv(|v| 3.0 - 2.0 * v);
         let other = ridges(60, 70, 12);
         let mix = &other * 0.5 - &companion * 2.0;
         let (heights, laid) = quilt_laid(
             &source,
-            &[companion, other.clone(), mix],
+            &[source.clone(), companion, other.clone(), mix],
             (150, 130),
             4,
             None,
         );
         assert_eq!(heights, alone);
-        for (a, b) in laid[0].iter().zip(&alone) {
-            assert!(
-                (a - (3.0 - 2.0 * b)).abs() < 1e-9,
-                "{a} vs {}",
-                3.0 - 2.0 * b
-            );
+        assert!(laid.iter().all(|l| l.dim() == (150, 130)));
+        // The source's own copy follows its integrated quilt (the same patches; the quilt
+        // keeps only the detail finer than half a patch and smooths the joins).
+        let r = crate::eval::correlation(laid[0].iter(), alone.iter());
+        assert!(r > 0.7, "copy against quilt: {r}"); // measured 0.80; another layout: near 0
+        // Every copied value is one of the companion's own.
+        let mut values: Vec<f64> = other.iter().copied().collect();
+        values.sort_by(f64::total_cmp);
+        assert!(
+            laid[2]
+                .iter()
+                .all(|v| values.binary_search_by(|x| x.total_cmp(v)).is_ok())
+        );
+        // Linear, exactly: an affine companion's copy is that map of the source's copy, and a
+        // weighted sum's copy the weighted sum of the copies.
+        for (((&s, &c), (&o, &m)), p) in laid[0]
+            .iter()
+            .zip(&laid[1])
+            .zip(laid[2].iter().zip(&laid[3]))
+            .zip(0..)
+        {
+            assert_eq!(c, 3.0 - 2.0 * s, "sample {p}");
+            assert_eq!(m, o * 0.5 - c * 2.0, "sample {p}");
         }
-        // An unrelated companion is laid, not quilted on its own: another seed's quilt of it
-        // differs, this one follows the source's layout.
-        assert_ne!(laid[1], quilt(&other, 150, 130, 4));
-        assert_eq!(laid[1].dim(), (150, 130));
-        // The source as its own companion is its quilt.
-        let (_, own) = quilt_laid(&source, std::slice::from_ref(&source), (150, 130), 4, None);
-        assert_eq!(own[0], alone);
-        // Linear up to the mean: a weighted sum's quilt is the weighted sum of the quilts (to
-        // the single precision of the source's blur).
-        let summed = &laid[1] * 0.5 - &laid[0] * 2.0;
-        let shift = laid[2].mean().unwrap() - summed.mean().unwrap();
-        let tolerance = 1e-5 * summed.std(0.0);
-        for (a, b) in laid[2].iter().zip(&summed) {
-            assert!((a - b - shift).abs() < tolerance, "{a} vs {b} + {shift}");
-        }
+        // Another seed lays the companion otherwise.
+        let (_, again) = quilt_laid(&source, std::slice::from_ref(&other), (150, 130), 5, None);
+        assert_ne!(again[0], laid[2]);
     }
 
     #[test]
