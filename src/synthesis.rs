@@ -321,16 +321,15 @@ impl MaterialModel {
             // than the exemplar's patches; this subspace's laid crop (its weights on the laid
             // basis) brings the structure finer.
             let sigma = detail_scale(e.rows, e.cols);
+            // The plane's coarse part plus the laid crop's detail is the laid crop plus the
+            // coarse part of their difference (the split is linear): one blur, not two.
             let with_detail = |plane: &Array2<f64>, details: Vec<(f64, &Array2<f64>)>| {
                 let mut laid = Array2::<f64>::zeros(plane.dim());
                 for (c, field) in details {
                     laid.scaled_add(c, field);
                 }
-                let ((coarse, _), (_, detail)) = rayon::join(
-                    || split_detail(plane, sigma, o.tileable),
-                    || split_detail(&laid, sigma, o.tileable),
-                );
-                coarse + detail
+                let (coarse, _) = split_detail(&(plane - &laid), sigma, o.tileable);
+                laid + coarse
             };
             if let Some(coefficients) = e.lightness.coefficients(k) {
                 colours[0] = with_detail(

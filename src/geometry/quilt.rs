@@ -234,14 +234,21 @@ fn quilt_patches(
     let (mut out, laid) = rayon::join(
         || integrate_detail_on_torus(&right, &down, sigma),
         || {
+            if companions.is_empty() {
+                return Vec::new();
+            }
+            // The source sample (row-major index) under every output sample, found once for
+            // all companions.
+            let from = Array2::from_shape_fn((rows, cols), |(r, col)| {
+                let [r0, c0, y0, x0] = placements[label[(r, col)] as usize];
+                let (y, x) = ((r + rows - r0) % rows, (col + cols - c0) % cols);
+                (y0 + y) % sr * sc + (x0 + x) % sc
+            });
             companions
                 .par_iter()
                 .map(|c| {
-                    Array2::from_shape_fn((rows, cols), |(r, col)| {
-                        let [r0, c0, y0, x0] = placements[label[(r, col)] as usize];
-                        let (y, x) = ((r + rows - r0) % rows, (col + cols - c0) % cols);
-                        c[((y0 + y) % sr, (x0 + x) % sc)]
-                    })
+                    let values: Vec<f64> = c.iter().copied().collect();
+                    from.mapv(|i| values[i])
                 })
                 .collect::<Vec<_>>()
         },
