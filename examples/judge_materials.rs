@@ -8,7 +8,7 @@
 //! row above synthesized row, the nine lights left to right).
 //!
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
-//! [--model KIND] [--no-colour-tables] [--no-lit-tables] [--verbose] [--sheet DIR]`; `--verbose` adds each
+//! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--verbose] [--sheet DIR]`; `--verbose` adds each
 //! light's subspace and its representative, and the share of the a* and b* variance in
 //! neighbour differences (near 0: colour constant over regions; 1: white noise).
 
@@ -58,6 +58,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         match a.as_str() {
             "--clusters" => options.clusters = args.next().ok_or("--clusters N")?.parse()?,
             "--model" => options.kind = args.next().ok_or("--model KIND")?.parse()?,
+            "--direction-share" => {
+                options.direction_share = Some(args.next().ok_or("--direction-share X")?.parse()?)
+            }
             "--no-colour-tables" => options.colour_matching = false,
             "--no-lit-tables" => options.lit_matching = false,
             "--verbose" => verbose = true,
