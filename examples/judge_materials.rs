@@ -8,9 +8,11 @@
 //! row above synthesized row, the nine lights left to right).
 //!
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
-//! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--verbose] [--sheet DIR]`; `--verbose` adds each
-//! light's subspace and its representative, and the share of the a* and b* variance in
-//! neighbour differences (near 0: colour constant over regions; 1: white noise).
+//! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--verbose]
+//! [--sheet DIR]`; `--direction-share` weighs the light and view directions in the clustering
+//! (see `AnalysisOptions::direction_share`); `--verbose` adds each light's subspace and its
+//! representative, and the share of the a* and b* variance in neighbour differences (near 0:
+//! colour constant over regions; 1: white noise).
 
 use std::path::PathBuf;
 

@@ -247,7 +247,9 @@ fn quilt_patches(
             companions
                 .par_iter()
                 .map(|c| {
-                    let values: Vec<f64> = c.iter().copied().collect();
+                    // Row-major without a copy for the (usual) standard-layout companion.
+                    let c = c.as_standard_layout();
+                    let values = c.as_slice().expect("standard layout is contiguous");
                     from.mapv(|i| values[i])
                 })
                 .collect::<Vec<_>>()
