@@ -9,10 +9,15 @@
 //!
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
 //! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--verbose]
-//! [--sheet DIR]`; `--direction-share` weighs the light and view directions in the clustering
+//! [--sheet DIR] [--seed N] [--pair-rank K]`; `--seed` sets the synthesis seed (default 1;
+//! one seed's figures move by about 0.1-0.3 crop levels from seed to seed); `--pair-rank K` is
+//! an experiment: every judged image gets the L* table of its own light rebuilt from the mean
+//! and K principal components (8-bit coefficients) of the tables of all frontal lights, as
+//! per-pair tables stored that way would give it; `--direction-share` weighs the light and view directions in the clustering
 //! (see `AnalysisOptions::direction_share`); `--verbose` adds each light's subspace and its
 //! representative, and the share of the a* and b* variance in neighbour differences (near 0:
-//! colour constant over regions; 1: white noise).
+//! colour constant over regions; 1: white noise), its L* percentiles, and the share of the
+//! chroma steps found off lightness edges.
 
 use std::path::PathBuf;
 
@@ -50,12 +55,107 @@ fn fine_share(image: &Array3<f32>) -> [f64; 2] {
     })
 }
 
+/// The share of the chroma's horizontal neighbour-difference energy (a*^2 + b*^2) found where
+/// the L* step is below its median: colour edges without a lightness edge (a stone two-toned
+/// by a quilt cut), where a material's own colour edges mostly follow its lightness edges.
+fn chroma_off_edges(image: &Array3<f32>) -> f64 {
+    let [l, a, b] = ColourSpace::Lab.planes(image);
+    let step = |p: &ndarray::Array2<f64>| &p.slice(s![.., 1..]) - &p.slice(s![.., ..-1]);
+    let (dl, da, db) = (step(&l), step(&a), step(&b));
+    let mut sorted: Vec<f64> = dl.iter().map(|v| v.abs()).collect();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let (mut off, mut all) = (0.0, 0.0);
+    for ((l, a), b) in dl.iter().zip(&da).zip(&db) {
+        let e = a * a + b * b;
+        all += e;
+        if l.abs() < median {
+            off += e;
+        }
+    }
+    off / all.max(1e-12)
+}
+
+/// The L* of `image` at the 5th, 25th, 50th, 75th and 95th percentiles.
+fn lightness_percentiles(image: &Array3<f32>) -> [f64; 5] {
+    let [l, _, _] = ColourSpace::Lab.planes(image);
+    let mut v: Vec<f64> = l.iter().copied().collect();
+    v.sort_by(f64::total_cmp);
+    [0.05, 0.25, 0.5, 0.75, 0.95].map(|p| v[((v.len() - 1) as f64 * p).round() as usize])
+}
+
+/// Experiment: L* tables of all frontal lights, their mean and `rank` principal components,
+/// coefficients quantised to 8 bits: returns per light the reconstructed table.
+fn pair_tables(btf: &Btf, rank: usize) -> Result<Vec<Vec<f64>>, Box<dyn std::error::Error>> {
+    use btfmrf::decompose::marginals::{band_probabilities, quantiles_at};
+    let p = band_probabilities();
+    let n = btf.lights().len();
+    let mut q = Vec::new();
+    for l in 0..n {
+        let [lp, _, _] = ColourSpace::Lab.planes(&btf.image(0, l)?);
+        q.push(quantiles_at(&lp, &p));
+    }
+    let d = p.len();
+    let mean: Vec<f64> = (0..d)
+        .map(|j| q.iter().map(|v| v[j]).sum::<f64>() / n as f64)
+        .collect();
+    let m = nalgebra::DMatrix::from_fn(n, d, |i, j| q[i][j] - mean[j]);
+    let svd = m.clone().svd(true, true);
+    let vt = svd.v_t.ok_or("svd")?;
+    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
+    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+    let mut out = vec![mean.clone(); n];
+    for &k in order.iter().take(rank) {
+        let basis: Vec<f64> = (0..d).map(|j| vt[(k, j)]).collect();
+        let c: Vec<f64> = (0..n)
+            .map(|i| (0..d).map(|j| m[(i, j)] * basis[j]).sum())
+            .collect();
+        let (lo, hi) = c
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        for i in 0..n {
+            let code = ((c[i] - lo) / (hi - lo).max(1e-12) * 255.0).round();
+            let cq = lo + code / 255.0 * (hi - lo);
+            for j in 0..d {
+                out[i][j] += cq * basis[j];
+            }
+        }
+    }
+    for t in &mut out {
+        for j in 1..d {
+            t[j] = t[j].max(t[j - 1]);
+        }
+    }
+    Ok(out)
+}
+
+/// Experiment: gives `image` the L* table `target` keeping chromaticity.
+fn match_lightness(image: &mut Array3<f32>, target: &[f64]) {
+    use btfmrf::decompose::marginals::{MarginalMap, band_probabilities};
+    let [lp, _, _] = ColourSpace::Lab.planes(image);
+    let map = MarginalMap::new(&lp, target, &band_probabilities());
+    let y = btfmrf::geometry::relight::luminance(image);
+    for r in 0..lp.nrows() {
+        for c in 0..lp.ncols() {
+            let t = f64::from(btfmrf::color::luminance_of_lightness(
+                map.apply(lp[(r, c)]) as f32
+            ));
+            let ratio = if y[(r, c)] > 1e-6 { t / y[(r, c)] } else { 1.0 };
+            for ch in 0..3 {
+                image[(ch, r, c)] *= ratio as f32;
+            }
+        }
+    }
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let mut materials = Vec::new();
     let mut options = AnalysisOptions::default();
     let mut sheet: Option<PathBuf> = None;
     let mut verbose = false;
+    let mut rank: Option<usize> = None;
+    let mut seed = 1;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--clusters" => options.clusters = args.next().ok_or("--clusters N")?.parse()?,
@@ -66,6 +166,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--no-colour-tables" => options.colour_matching = false,
             "--no-lit-tables" => options.lit_matching = false,
             "--verbose" => verbose = true,
+            "--seed" => seed = args.next().ok_or("--seed N")?.parse()?,
+            "--pair-rank" => rank = Some(args.next().ok_or("--pair-rank K")?.parse()?),
             "--sheet" => sheet = Some(args.next().ok_or("--sheet DIR")?.into()),
             m => materials.push(m.parse::<SyntheticMaterial>()?),
         }
@@ -87,10 +189,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let o = SynthesisOptions {
             rows: 128,
             cols: 128,
-            seed: 1,
+            seed,
             tileable: false,
         };
         let cache = model.synthesis_cache(&o)?;
+        let tables = rank.map(|k| pair_tables(&btf, k)).transpose()?;
         let (mut log_ratio, mut colour) = (0.0, 0.0);
         let (mut measured_row, mut synthesized_row) = (Vec::new(), Vec::new());
         for &(theta, phi) in &LIGHTS {
@@ -106,7 +209,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 Some(&other.image(0, l)?),
                 1,
             )?;
-            let image = model.image_from_cache(&cache, &view, &light)?;
+            let mut image = model.image_from_cache(&cache, &view, &light)?;
+            if let Some(t) = &tables {
+                match_lightness(&mut image, &t[l]);
+            }
             if verbose {
                 let k = model.cluster_of(0, l)?;
                 let (rv, rl) = model.subspaces()[k].representative;
@@ -144,6 +250,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     "  colour L*, a*, b*: {:.2?} (another crop {:.2?})",
                     v.judgement.colour_lab_channels,
                     y.levels().crop.judgement.colour_lab_channels
+                );
+                println!(
+                    "  L* at 5/25/50/75/95 %: measured {:.1?}, synthesized {:.1?}",
+                    lightness_percentiles(&measured),
+                    lightness_percentiles(&image)
+                );
+                println!(
+                    "  chroma steps off lightness edges: measured {:.3}, synthesized {:.3}",
+                    chroma_off_edges(&measured),
+                    chroma_off_edges(&image)
                 );
                 println!(
                     "  a*, b* fine share: measured {:.3?}, synthesized {:.3?}",

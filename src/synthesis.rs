@@ -643,7 +643,7 @@ impl MaterialModel {
         } else {
             e.crop(0)?
         };
-        Some(laid_exemplar(&guide, e, o, (seed, phase.as_ref())).1)
+        Some(laid_exemplar(&guide, e, o, (seed, phase.as_ref(), true)).1)
     }
 
     /// The range map's heights ([`MaterialModel::range_heights`], the same values) and the
@@ -656,7 +656,7 @@ impl MaterialModel {
             return None;
         }
         let seed = crate::mrf::noise::mix(o.seed, RANGE_SEED);
-        Some(laid_exemplar(&map.samples(), e, o, (seed, None)))
+        Some(laid_exemplar(&map.samples(), e, o, (seed, None, false)))
     }
 
     /// The bump strength for `light`: the measured lights' fitted strengths
@@ -737,15 +737,24 @@ fn cropped(field: Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
 const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
 /// `guide` quilted for the output of `o` (on [`quilt_torus`], then cropped) with the
 /// exemplar's basis crops laid by the same patches ([`quilt_laid`]): the guide's quilt and
-/// the crops' copies; with a phase, every patch keeps the lattice's phase.
+/// the crops' copies; with a phase, every patch keeps the lattice's phase. The mean crop's
+/// colour (its a* and b*, and its L* when the guide is not itself a lightness) chooses the
+/// patches and cuts with the guide, so no cut joins two colours on one flat surface.
 fn laid_exemplar(
     guide: &Array2<f64>,
     e: &Exemplar,
     o: &SynthesisOptions,
-    (seed, phase): (u64, Option<&Phase>),
+    (seed, phase, guide_is_lightness): (u64, Option<&Phase>, bool),
 ) -> (Array2<f64>, LaidExemplar) {
     let torus = quilt_torus(o, patch_side(e.rows, e.cols));
-    let (guide, details) = quilt_laid(guide, &exemplar_planes(e), torus, seed, phase);
+    let lightness = e.lightness.basis.len();
+    let chroma = e.chroma.is_some().then_some([lightness, lightness + 1]);
+    let matched: Vec<usize> = (!guide_is_lightness)
+        .then_some(0)
+        .into_iter()
+        .chain(chroma.into_iter().flatten())
+        .collect();
+    let (guide, details) = quilt_laid(guide, &exemplar_planes(e), &matched, torus, seed, phase);
     let mut details = details.into_iter().map(|d| cropped(d, o.rows, o.cols));
     let lightness = details.by_ref().take(e.lightness.basis.len()).collect();
     let mut chroma = Vec::new();
