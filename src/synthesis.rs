@@ -738,8 +738,8 @@ const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
 /// `guide` quilted for the output of `o` (on [`quilt_torus`], then cropped) with the
 /// exemplar's basis crops laid by the same patches ([`quilt_laid`]): the guide's quilt and
 /// the crops' copies; with a phase, every patch keeps the lattice's phase. The mean crop's
-/// colour (its a* and b*, and its L* when the guide is not itself a lightness) chooses the
-/// patches and cuts with the guide, so no cut joins two colours on one flat surface.
+/// colour (its a* and b*, and its L* when the guide is not itself a lightness) helps the
+/// guide choose the patches and cuts, so fewer cuts join two colours on one flat surface.
 fn laid_exemplar(
     guide: &Array2<f64>,
     e: &Exemplar,
@@ -747,14 +747,8 @@ fn laid_exemplar(
     (seed, phase, guide_is_lightness): (u64, Option<&Phase>, bool),
 ) -> (Array2<f64>, LaidExemplar) {
     let torus = quilt_torus(o, patch_side(e.rows, e.cols));
-    let lightness = e.lightness.basis.len();
-    let chroma = e.chroma.is_some().then_some([lightness, lightness + 1]);
-    let matched: Vec<usize> = (!guide_is_lightness)
-        .then_some(0)
-        .into_iter()
-        .chain(chroma.into_iter().flatten())
-        .collect();
-    let (guide, details) = quilt_laid(guide, &exemplar_planes(e), &matched, torus, seed, phase);
+    let (planes, matched) = exemplar_planes(e, guide_is_lightness);
+    let (guide, details) = quilt_laid(guide, &planes, &matched, torus, seed, phase);
     let mut details = details.into_iter().map(|d| cropped(d, o.rows, o.cols));
     let lightness = details.by_ref().take(e.lightness.basis.len()).collect();
     let mut chroma = Vec::new();
@@ -768,15 +762,26 @@ fn laid_exemplar(
 }
 
 /// The exemplar's basis crops as planes at the crop's pixels: the L* mean and deviations, then
-/// each chroma basis field's a* and b*.
-fn exemplar_planes(e: &Exemplar) -> Vec<Array2<f64>> {
-    let lightness = (0..e.lightness.basis.len()).filter_map(|j| e.plane(j));
-    let chroma = e.chroma.iter().flat_map(|c| {
+/// each chroma basis field's a* and b*; and the indices of the mean crop's planes that help
+/// choose the quilt's patches (its a* and b*, and its L* unless `guide_is_lightness`).
+fn exemplar_planes(e: &Exemplar, guide_is_lightness: bool) -> (Vec<Array2<f64>>, Vec<usize>) {
+    let mut planes: Vec<Array2<f64>> = (0..e.lightness.basis.len())
+        .filter_map(|j| e.plane(j))
+        .collect();
+    let mut matched = Vec::new();
+    if !guide_is_lightness && !planes.is_empty() {
+        matched.push(0);
+    }
+    let first_chroma = planes.len();
+    planes.extend(e.chroma.iter().flat_map(|c| {
         (0..c.fields.basis.len())
             .filter_map(|j| c.crop_planes(j, e.rows, e.cols))
             .flatten()
-    });
-    lightness.chain(chroma).collect()
+    }));
+    if planes.len() >= first_chroma + 2 {
+        matched.extend([first_chroma, first_chroma + 1]);
+    }
+    (planes, matched)
 }
 
 /// Mixed into the synthesis seed for the exemplar's quilt.
