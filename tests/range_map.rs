@@ -30,12 +30,15 @@ fn angular_error(est: &ndarray::Array3<f64>, truth: &ndarray::Array3<f32>) -> (f
 #[test]
 fn normals_and_heights_of_the_synthetic_materials() {
     // Thresholds set from measured results (printed below) with some margin; the leather's
-    // grain is a few texels deep with glossy highlights, the hardest case.
-    for (material, max_median_deg, min_corr) in [
-        (SyntheticMaterial::Sponge, 12.0, 0.75),
-        (SyntheticMaterial::Knit, 12.0, 0.75),
-        (SyntheticMaterial::Stones, 12.0, 0.65),
-        (SyntheticMaterial::Leather, 15.0, 0.5),
+    // grain is a few texels deep with glossy highlights, the hardest case. Measured (mean
+    // angle, height correlation) with the first robust fit alone, then with the refits on the
+    // lights it finds lit: sponge 13.0 -> 5.9 deg, 0.80 -> 0.97; stones 17.3 -> 9.2 deg, 0.77
+    // -> 0.96; leather 6.7 -> 6.2 deg, 0.79 -> 0.88; knit 4.4 -> 3.9 deg, 0.970 -> 0.985.
+    for (material, max_mean_deg, max_median_deg, min_corr) in [
+        (SyntheticMaterial::Sponge, 9.0, 12.0, 0.93),
+        (SyntheticMaterial::Knit, 6.0, 12.0, 0.95),
+        (SyntheticMaterial::Stones, 12.0, 12.0, 0.9),
+        (SyntheticMaterial::Leather, 9.0, 15.0, 0.8),
     ] {
         let source = SyntheticBtf::new(material, 64, 3).unwrap();
         let truth = source.ground_truth();
@@ -58,6 +61,7 @@ fn normals_and_heights_of_the_synthetic_materials() {
             "{material}: normals mean {mean:.1} deg, median {median:.1} deg; height correlation {corr:.3}; {} fallback pixels",
             map.fallback_pixels
         );
+        assert!(mean < max_mean_deg, "{material}: mean {mean}");
         assert!(median < max_median_deg, "{material}: median {median}");
         assert!(corr > min_corr, "{material}: correlation {corr}");
     }

@@ -1,9 +1,14 @@
 //! Over-determined photometric stereo on the frontal (or only) view of a BTF (seed 001,
 //! sec. 5.3; mrf_math.md 1(b)): per pixel, a robust least-squares fit of
 //! `I_j = g . l_j + c` over the lights j, giving the normal `g / |g|` and the albedo `|g|`.
-//! The constant c absorbs ambient light. Shadowed samples (the darkest 20 % of a pixel's
-//! samples) and highlights (the brightest 10 %) are dropped, as are grazing lights; a pixel
-//! whose remaining lights are too few or too coplanar falls back to the straight-up normal.
+//! The constant c absorbs ambient light. A first fit drops the darkest 20 % of a pixel's
+//! samples (shadows) and the brightest 10 % (highlights), as well as grazing lights; refits
+//! then keep the lights that fit says are lit: facing the normal and not far darker than it
+//! predicts (a cast shadow). On steep relief a fixed share is not enough: a pit's wall is in
+//! attached or cast shadow under half the lights, and the first fit alone flattened the
+//! built-in sponge's and stones' normals (heights 0.64-0.68 of the true relief, correlation
+//! 0.73-0.78; with the refits 0.76-0.88 and 0.93-0.97). A pixel whose lights are too few or too
+//! coplanar falls back to the straight-up normal.
 
 use nalgebra::{Matrix4, Vector4};
 use ndarray::{Array2, Array3};
@@ -110,8 +115,9 @@ pub fn estimate_normals(
     })
 }
 
-/// The robust fit of one pixel: drop shadows and highlights by rank, solve the 4x4 normal
-/// equations, reject ill-conditioned systems and normals facing away.
+/// The robust fit of one pixel: a first fit on the lights left after dropping shadows and
+/// highlights by rank, then [`REFINEMENTS`] refits on the lights the previous fit says are
+/// lit ([`lit_by_fit`]).
 fn fit_pixel(
     lights: &[(usize, [f64; 3])],
     intensity: impl Fn(usize) -> f64,
@@ -123,9 +129,53 @@ fn fit_pixel(
     let hi = (n - (n as f64 * HIGHLIGHT_FRACTION) as usize)
         .max(lo + 3)
         .min(n);
+    let bright = &order[hi..];
+    let mut fit = solve(lights, &order[lo..hi], &intensity)?;
+    for _ in 0..REFINEMENTS {
+        let kept: Vec<usize> = order
+            .iter()
+            .copied()
+            .filter(|j| !bright.contains(j) && lit_by_fit(&fit, lights[*j].1, intensity(*j)))
+            .collect();
+        match solve(lights, &kept, &intensity) {
+            Some(refined) => fit = refined,
+            None => break,
+        }
+    }
+    normal_of(fit)
+}
+
+/// Refits of [`fit_pixel`] on the lights its previous fit explains.
+const REFINEMENTS: usize = 3;
+/// A light is left out of a refit where the previous fit's `n . l` is below this (attached
+/// shadow and grazing light, where the clamped cosine is not the linear model's) ...
+const MIN_COSINE: f64 = 0.1;
+/// ... or where the sample is darker than the ambient plus this share of the fit's direct
+/// term (a cast shadow: the relief hides the light the normal faces).
+const CAST_SHADOW_SHARE: f64 = 0.5;
+
+/// Whether a light `l` with measured `intensity` is lit as the fit `[g, c]` (`g` = albedo
+/// times normal, `c` the constant) sees it: facing it by [`MIN_COSINE`] and not darker than a
+/// cast shadow would make it.
+fn lit_by_fit(fit: &[f64; 4], l: [f64; 3], intensity: f64) -> bool {
+    let rho = fit[..3].iter().map(|v| v * v).sum::<f64>().sqrt();
+    let direct = fit[0] * l[0] + fit[1] * l[1] + fit[2] * l[2];
+    direct > MIN_COSINE * rho && intensity >= fit[3] + CAST_SHADOW_SHARE * direct
+}
+
+/// Least squares of `I_j = g . l_j + c` over the lights `used`; `None` where the system is
+/// singular or ill-conditioned (too few or too coplanar lights).
+fn solve(
+    lights: &[(usize, [f64; 3])],
+    used: &[usize],
+    intensity: &impl Fn(usize) -> f64,
+) -> Option<[f64; 4]> {
+    if used.len() < 4 {
+        return None;
+    }
     let mut ata = Matrix4::<f64>::zeros();
     let mut atb = Vector4::<f64>::zeros();
-    for &j in &order[lo..hi] {
+    for &j in used {
         let l = lights[j].1;
         let row = Vector4::new(l[0], l[1], l[2], 1.0);
         ata += row * row.transpose();
@@ -139,7 +189,12 @@ fn fit_pixel(
         return None;
     }
     let sol = ata.cholesky()?.solve(&atb);
-    let g = [sol[0], sol[1], sol[2]];
+    Some([sol[0], sol[1], sol[2], sol[3]])
+}
+
+/// The unit normal and albedo of a fit; `None` where it is degenerate or faces away.
+fn normal_of(fit: [f64; 4]) -> Option<([f64; 3], f64)> {
+    let g = [fit[0], fit[1], fit[2]];
     let rho = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
     if !rho.is_finite() || rho < 1e-9 || g[2] <= 0.05 * rho {
         return None;
@@ -174,6 +229,44 @@ mod tests {
             .to_degrees();
         assert!(angle < 0.5, "{angle}");
         assert!((rho - 0.7).abs() < 0.02, "{rho}");
+    }
+
+    #[test]
+    fn a_steep_facet_in_attached_and_cast_shadow_gets_its_normal_from_the_lights_that_reach_it() {
+        // A facet tilted 40 degrees towards +x, with ambient light; lights on the -x side
+        // graze or miss it (attached shadow) and a wall on its +y side hides the lights from
+        // around +y below 50 degrees of elevation (cast shadow).
+        let t = 40f64.to_radians();
+        let n = [t.sin(), 0.0, t.cos()];
+        let lights: Vec<(usize, [f64; 3])> = (0..48)
+            .map(|k| {
+                let d = crate::btf::Direction::new(10.0 + 10.0 * (k % 7) as f64, 7.5 * k as f64);
+                (k, d.vector())
+            })
+            .collect();
+        let hidden = |l: [f64; 3]| l[1] > 0.4 && l[2] < 0.77;
+        let shade = |j: usize| {
+            let l = lights[j].1;
+            let cosine = l.iter().zip(&n).map(|(a, b)| a * b).sum::<f64>().max(0.0);
+            0.6 * (0.15 + if hidden(l) { 0.0 } else { cosine })
+        };
+        let angle = |est: [f64; 3]| {
+            est.iter()
+                .zip(&n)
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees()
+        };
+        let (est, rho) = fit_pixel(&lights, shade).unwrap();
+        assert!(angle(est) < 1.0, "{}", angle(est));
+        assert!((rho - 0.6).abs() < 0.02, "{rho}");
+        // The first fit alone (the darkest fifth and brightest tenth dropped) is 7 degrees off.
+        let mut order: Vec<usize> = (0..lights.len()).collect();
+        order.sort_by(|&a, &b| shade(a).total_cmp(&shade(b)));
+        let first = normal_of(solve(&lights, &order[9..44], &shade).unwrap()).unwrap();
+        assert!(angle(first.0) > 5.0, "{}", angle(first.0));
     }
 
     #[test]
