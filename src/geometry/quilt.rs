@@ -140,8 +140,8 @@ pub fn split_detail(field: &Array2<f64>, sigma: f64, wrap: bool) -> (Array2<f64>
 /// With `phase`, every patch keeps the lattice's phase ([`Phase`]).
 ///
 /// # Panics
-/// A companion's shape differs from the source's, a matched index out of range, an empty
-/// source or a zero output size.
+/// A companion's shape differs from the source's, a matched index out of range, more than
+/// [`MAX_MATCHED`] matched, an empty source or a zero output size.
 pub fn quilt_laid(
     source: &Array2<f64>,
     companions: &[Array2<f64>],
@@ -200,16 +200,17 @@ fn quilt_patches(
                 .flat_map(|y| (0..hc).map(move |x| (y, x)))
                 .filter(|&(y, x)| filled[at(y, x)])
                 .collect();
-            let known_in = |field: &Array2<f64>| -> Vec<(usize, usize, f64)> {
-                known_at
+            let known = Known {
+                values: known_at
                     .iter()
-                    .map(|&(y, x)| (y, x, field[at(y, x)]))
-                    .collect()
+                    .flat_map(|&(y, x)| {
+                        std::iter::once(&out)
+                            .chain(&out_colour)
+                            .map(move |field| field[at(y, x)])
+                    })
+                    .collect(),
+                at: known_at,
             };
-            let known: Vec<Vec<(usize, usize, f64)>> = std::iter::once(&out)
-                .chain(&out_colour)
-                .map(known_in)
-                .collect();
             // Patches keep the phase of their unwrapped position (the first one starts an
             // overlap before the origin), so the output from its origin is in step.
             let offsets =
@@ -387,20 +388,19 @@ fn candidate_offsets(side: usize, len: usize, phase: Option<(f64, &Phase, usize)
 }
 
 /// The source offset of the next patch and the height it is lifted by: uniformly among the
-/// candidates whose squared error against the `known` output samples (patch row, column,
-/// value), after the best lift (the mean difference), is within [`TOLERANCE`] of the best.
-/// Lifting lets patches from different heights meet without a step. Offsets beyond the source
-/// wrap around it (only for sources smaller than a patch). Every candidate is first scored on
-/// the known samples of every [`COARSE_STRIDE`]-th patch row; the [`SHORTLIST`] best are
-/// scored on all of them. `known` holds the relief's samples, then each matched companion's
-/// (see [`Guide`]), at the same places. (Ranking on the relief alone and adding the
-/// companions only on the shortlist was up to 1.5x faster at 1024^2, but it left a tileable
-/// canvas synthesis a wrap-around seam at 3.3 standard deviations.)
+/// candidates whose squared error against the `known` output samples, after the best lift
+/// (the mean difference), is within [`TOLERANCE`] of the best. Lifting lets patches from
+/// different heights meet without a step. Offsets beyond the source wrap around it (only for
+/// sources smaller than a patch). Every candidate is first scored on the known samples of
+/// every [`COARSE_STRIDE`]-th patch row; the [`SHORTLIST`] best are scored on all of them.
+/// (Ranking on the relief alone and adding the matched companions only on the shortlist was
+/// up to 1.5x faster at 1024^2, but it left a tileable canvas synthesis a wrap-around seam at
+/// 3.3 standard deviations.)
 fn choose(
     guide: &Guide,
     (hr, hc): (usize, usize),
     [ys, xs]: &[Vec<usize>; 2],
-    known: &[Vec<(usize, usize, f64)>],
+    known: &Known,
     rng: &mut Xoshiro256PlusPlus,
 ) -> (usize, usize, f64) {
     let (sr, sc) = guide.relief.dim();
@@ -408,21 +408,15 @@ fn choose(
         .iter()
         .flat_map(|&y| xs.iter().map(move |&x| (y, x)))
         .collect();
-    if known[0].is_empty() {
+    if known.at.is_empty() {
         let (y, x) = candidates[rng.random_range(0..candidates.len())];
         return (y, x, 0.0);
     }
     let fits_inside = hr <= sr && hc <= sc;
-    let on_coarse_rows = |k: &Vec<(usize, usize, f64)>| -> Vec<(usize, usize, f64)> {
-        k.iter()
-            .copied()
-            .filter(|k| k.0 % COARSE_STRIDE == 0)
-            .collect()
-    };
-    let mut coarse: Vec<Vec<(usize, usize, f64)>> = known.iter().map(on_coarse_rows).collect();
-    if coarse[0].is_empty() {
+    let mut coarse = known.on_rows(guide.channels, |y| y % COARSE_STRIDE == 0);
+    if coarse.at.is_empty() {
         // A thin band on rows the stride skips (tiny patches): score on all of it.
-        coarse = known.to_vec();
+        coarse = known.on_rows(guide.channels, |_| true);
     }
     let rough = guide.misfits(&candidates, &coarse, fits_inside);
     let mut order: Vec<usize> = (0..candidates.len()).collect();
@@ -442,6 +436,34 @@ fn choose(
     (shortlist[pick].0, shortlist[pick].1, scored[pick].1)
 }
 
+/// The output samples already filled under a patch: their places (patch row, column), and per
+/// place the relief's value followed by each matched companion's (scaled as in the guide).
+struct Known {
+    at: Vec<(usize, usize)>,
+    values: Vec<f64>,
+}
+
+impl Known {
+    /// The samples on the patch rows `keep` accepts; `channels` values a sample.
+    fn on_rows(&self, channels: usize, keep: impl Fn(usize) -> bool) -> Self {
+        let (at, values) = self
+            .at
+            .iter()
+            .zip(self.values.chunks_exact(channels))
+            .filter(|((y, _), _)| keep(*y))
+            .map(|(&p, v)| (p, v))
+            .unzip::<_, _, Vec<_>, Vec<_>>();
+        Self {
+            at,
+            values: values.concat(),
+        }
+    }
+}
+
+/// Most matched companions a quilt takes (the exemplar's mean L*, a* and b*): the guide's
+/// samples are scanned with the relief's in one pass, at most four values a sample.
+pub const MAX_MATCHED: usize = 3;
+
 /// What chooses the patches and their cuts: the high-passed relief (its squared misfit times
 /// `relief_weight`, after the best lift) and the matched companions, each scaled so that its
 /// plain squared misfit is already weighted.
@@ -449,6 +471,10 @@ struct Guide<'a> {
     relief: &'a Array2<f64>,
     relief_weight: f64,
     colour: Vec<Array2<f64>>,
+    /// The relief and the scaled companions interleaved, row-major: `channels` values a source
+    /// sample, the relief's first (what the misfits scan).
+    fused: Vec<f64>,
+    channels: usize,
 }
 
 impl<'a> Guide<'a> {
@@ -456,113 +482,138 @@ impl<'a> Guide<'a> {
     /// matched companions over theirs, together [`MATCHED_WEIGHT`] of it. A flat field
     /// (variance 0) weighs nothing.
     fn new(relief: &'a Array2<f64>, companions: &[Array2<f64>], matched: &[usize]) -> Self {
+        assert!(
+            matched.len() <= MAX_MATCHED,
+            "at most {MAX_MATCHED} matched"
+        );
         let inverse = |v: f64| if v > 1e-24 { 1.0 / v } else { 0.0 };
-        if matched.is_empty() {
-            return Self {
-                relief,
-                relief_weight: 1.0,
-                colour: Vec::new(),
-            };
-        }
-        let share = MATCHED_WEIGHT / matched.len() as f64;
-        let colour = matched
-            .iter()
-            .map(|&k| {
-                let c = &companions[k];
-                c * (share * inverse(c.var(0.0))).sqrt()
-            })
+        let (relief_weight, colour) = if matched.is_empty() {
+            (1.0, Vec::new())
+        } else {
+            let share = MATCHED_WEIGHT / matched.len() as f64;
+            let colour: Vec<Array2<f64>> = matched
+                .iter()
+                .map(|&k| {
+                    let c = &companions[k];
+                    c * (share * inverse(c.var(0.0))).sqrt()
+                })
+                .collect();
+            (inverse(relief.var(0.0)), colour)
+        };
+        let fused = relief
+            .indexed_iter()
+            .flat_map(|(p, &h)| std::iter::once(h).chain(colour.iter().map(move |c| c[p])))
             .collect();
         Self {
             relief,
-            relief_weight: inverse(relief.var(0.0)),
+            relief_weight,
+            channels: 1 + colour.len(),
             colour,
+            fused,
         }
     }
 
     /// Per candidate, the weighted misfit (the relief's after its best lift, plus the matched
-    /// companions') and the relief's lift; `known` as for [`choose`].
+    /// companions') and the relief's lift.
     fn misfits(
         &self,
         candidates: &[(usize, usize)],
-        known: &[Vec<(usize, usize, f64)>],
+        known: &Known,
         inside: bool,
     ) -> Vec<(f64, f64)> {
-        let n = known[0].len().max(1) as f64;
-        let mut scores: Vec<(f64, f64)> = misfits(self.relief, candidates, &known[0], inside)
-            .into_iter()
-            .map(|(sq, sum)| (self.relief_weight * (sq - sum * sum / n).max(0.0), sum / n))
-            .collect();
-        for (field, known) in self.colour.iter().zip(&known[1..]) {
-            for (score, (sq, _)) in scores
-                .iter_mut()
-                .zip(misfits(field, candidates, known, inside))
-            {
-                score.0 += sq;
+        let n = known.at.len().max(1) as f64;
+        let sums = match self.channels {
+            1 => self.sums::<1>(candidates, known, inside),
+            2 => self.sums::<2>(candidates, known, inside),
+            3 => self.sums::<3>(candidates, known, inside),
+            _ => self.sums::<4>(candidates, known, inside),
+        };
+        sums.into_iter()
+            .map(|[sum, sq, matched]| {
+                (
+                    self.relief_weight * (sq - sum * sum / n).max(0.0) + matched,
+                    sum / n,
+                )
+            })
+            .collect()
+    }
+
+    /// For each candidate source offset, the sums of the `known` samples' differences from
+    /// the source's: the relief's differences, their squares, and the matched companions'
+    /// squares. `CH` is [`Guide::channels`]. `inside`: every candidate patch lies inside the
+    /// source, so each run of known samples along a patch row is compared with a contiguous
+    /// run of the source; otherwise the source is read sample by sample, wrapping around.
+    fn sums<const CH: usize>(
+        &self,
+        candidates: &[(usize, usize)],
+        known: &Known,
+        inside: bool,
+    ) -> Vec<[f64; 3]> {
+        let (sr, sc) = self.relief.dim();
+        // Runs of consecutive known samples along a patch row: (offset from the candidate's
+        // corner in the source, first known sample, length); only the contiguous reads use them.
+        let mut runs: Vec<(usize, usize, usize)> = Vec::new();
+        for (i, &(y, x)) in known.at.iter().enumerate().filter(|_| inside) {
+            let extends = i > 0 && known.at[i - 1].0 == y && known.at[i - 1].1 + 1 == x;
+            match runs.last_mut() {
+                Some(run) if extends => run.2 += 1,
+                _ => runs.push((y * sc + x, i, 1)),
             }
         }
-        scores
+        candidates
+            .par_iter()
+            .map(|&(y0, x0)| {
+                // Four lanes of independent accumulators (differences, their squares, the
+                // companions' squares), so the sums need not wait on each other.
+                let mut acc = [[0.0f64; 4]; 3];
+                if inside {
+                    let corner = &self.fused[(y0 * sc + x0) * CH..];
+                    for &(at, first, len) in &runs {
+                        accumulate::<CH>(
+                            &known.values[first * CH..(first + len) * CH],
+                            &corner[at * CH..(at + len) * CH],
+                            &mut acc,
+                        );
+                    }
+                } else {
+                    for (&(y, x), v) in known.at.iter().zip(known.values.chunks_exact(CH)) {
+                        let at = ((y0 + y) % sr * sc + (x0 + x) % sc) * CH;
+                        accumulate::<CH>(v, &self.fused[at..at + CH], &mut acc);
+                    }
+                }
+                acc.map(|lanes| lanes.iter().sum::<f64>())
+            })
+            .collect()
     }
 }
 
-/// For each candidate source offset, the sum of squares and the sum of the differences of
-/// the `known` output samples (patch row, column, value) from its samples. `inside`: every
-/// candidate patch lies inside the source, so each run of known samples along a patch row is
-/// compared with a contiguous run of the source (in four independent accumulators, so the
-/// sums need not wait on each other); otherwise the source is read sample by sample,
-/// wrapping around.
-fn misfits(
-    source: &Array2<f64>,
-    candidates: &[(usize, usize)],
-    known: &[(usize, usize, f64)],
-    inside: bool,
-) -> Vec<(f64, f64)> {
-    let (sr, sc) = source.dim();
-    let flat = source.as_slice().filter(|_| inside);
-    // Runs of consecutive known samples along a patch row: (offset from the candidate's
-    // corner in the source, first index into `values`, length); only the flat reads use them.
-    let values: Vec<f64> = known.iter().map(|k| k.2).collect();
-    let mut runs: Vec<(usize, usize, usize)> = Vec::new();
-    for (i, &(y, x, _)) in known.iter().enumerate().filter(|_| flat.is_some()) {
-        let extends = i > 0 && known[i - 1].0 == y && known[i - 1].1 + 1 == x;
-        match runs.last_mut() {
-            Some(run) if extends => run.2 += 1,
-            _ => runs.push((y * sc + x, i, 1)),
+/// Adds the differences `values - source` (interleaved, `CH` values a sample, the relief's
+/// first) to `acc`: the relief's differences to `acc[0]`, their squares to `acc[1]`, the other
+/// channels' squares to `acc[2]`; four consecutive samples go to the four lanes, a remainder
+/// to the first.
+fn accumulate<const CH: usize>(values: &[f64], source: &[f64], acc: &mut [[f64; 4]; 3]) {
+    let mut add = |v: &[f64], s: &[f64], lane: usize| {
+        let d = v[0] - s[0];
+        acc[0][lane] += d;
+        acc[1][lane] += d * d;
+        for c in 1..CH {
+            let d = v[c] - s[c];
+            acc[2][lane] += d * d;
+        }
+    };
+    let (vc, sc) = (values.chunks_exact(4 * CH), source.chunks_exact(4 * CH));
+    let tail = vc
+        .remainder()
+        .chunks_exact(CH)
+        .zip(sc.remainder().chunks_exact(CH));
+    for (v, s) in vc.zip(sc) {
+        for lane in 0..4 {
+            add(&v[lane * CH..], &s[lane * CH..], lane);
         }
     }
-    candidates
-        .par_iter()
-        .map(|&(y0, x0)| {
-            let (sum, sq) = match flat {
-                Some(data) => {
-                    let corner = &data[y0 * sc + x0..];
-                    let (mut sum, mut sq) = ([0.0f64; 4], [0.0f64; 4]);
-                    for &(at, first, len) in &runs {
-                        let (v, s) = (&values[first..first + len], &corner[at..at + len]);
-                        let (vc, sc4) = (v.chunks_exact(4), s.chunks_exact(4));
-                        let tail = vc.remainder().iter().zip(sc4.remainder());
-                        for (v, s) in vc.zip(sc4) {
-                            for lane in 0..4 {
-                                let d = v[lane] - s[lane];
-                                sum[lane] += d;
-                                sq[lane] += d * d;
-                            }
-                        }
-                        for (v, s) in tail {
-                            let d = v - s;
-                            sum[0] += d;
-                            sq[0] += d * d;
-                        }
-                    }
-                    (sum.iter().sum::<f64>(), sq.iter().sum::<f64>())
-                }
-                None => known.iter().fold((0.0, 0.0), |(sum, sq), &(y, x, v)| {
-                    let d = v - source[((y0 + y) % sr, (x0 + x) % sc)];
-                    (sum + d, sq + d * d)
-                }),
-            };
-            (sq, sum)
-        })
-        .collect()
+    for (v, s) in tail {
+        add(v, s, 0);
+    }
 }
 
 /// Which samples of a patch replace the output: every unknown sample, and the known ones on
@@ -706,6 +757,65 @@ mod tests {
     fn mean_std(a: &Array2<f64>) -> (f64, f64) {
         let m = a.mean().unwrap();
         (m, a.std(0.0))
+    }
+
+    #[test]
+    fn fused_misfits_match_the_sums_written_out() {
+        // A relief and two matched companions; known samples on an L-shaped band of a 6 x 7
+        // patch. Both the contiguous and the wrapping scan must give, per candidate, the
+        // weighted misfit and the lift as written out sample by sample.
+        let field = |k: usize| {
+            Array2::from_shape_fn((20, 24), |(y, x)| {
+                ((y * 31 + x * 17 + k * 7) % 23) as f64 * (1.0 + k as f64) - 5.0
+            })
+        };
+        let (relief, companions) = (field(0), vec![field(1), field(2), field(3)]);
+        for matched in [vec![], vec![2], vec![0, 2], vec![0, 1, 2]] {
+            let guide = Guide::new(&relief, &companions, &matched);
+            let at: Vec<(usize, usize)> = (0..6)
+                .flat_map(|y| (0..7).map(move |x| (y, x)))
+                .filter(|&(y, x)| y < 2 || x < 3)
+                .collect();
+            let value = |k: usize, c: usize| ((k * 13 + c * 5) % 11) as f64 - 4.0;
+            let known = Known {
+                values: (0..at.len())
+                    .flat_map(|k| (0..guide.channels).map(move |c| value(k, c)))
+                    .collect(),
+                at,
+            };
+            let candidates = [(0, 0), (3, 5), (14, 17), (7, 2)];
+            let n = known.at.len() as f64;
+            let written_out: Vec<(f64, f64)> = candidates
+                .iter()
+                .map(|&(y0, x0)| {
+                    let (mut sum, mut sq, mut other) = (0.0, 0.0, 0.0);
+                    for (k, &(y, x)) in known.at.iter().enumerate() {
+                        let d = value(k, 0) - relief[(y0 + y, x0 + x)];
+                        (sum, sq) = (sum + d, sq + d * d);
+                        for (c, field) in guide.colour.iter().enumerate() {
+                            other += (value(k, c + 1) - field[(y0 + y, x0 + x)]).powi(2);
+                        }
+                    }
+                    (guide.relief_weight * (sq - sum * sum / n) + other, sum / n)
+                })
+                .collect();
+            for inside in [true, false] {
+                for (got, want) in guide
+                    .misfits(&candidates, &known, inside)
+                    .iter()
+                    .zip(&written_out)
+                {
+                    assert!(
+                        (got.0 - want.0).abs() < 1e-9 * want.0.abs().max(1.0),
+                        "{matched:?} {inside}: {got:?} {want:?}"
+                    );
+                    assert!(
+                        (got.1 - want.1).abs() < 1e-12,
+                        "{matched:?} {inside}: {got:?} {want:?}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
