@@ -20,7 +20,7 @@ use crate::geometry::integrate::{Edges, normals_of, normals_of_periodic};
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::relight::{SHADING_FLOOR, shading_factor};
 use crate::geometry::{
-    Phase, detail_scale, patch_side, quilt, quilt_laid, resample_periodic, split_detail,
+    Phase, Placement, detail_scale, patch_side, quilt, quilt_laid, resample_periodic, split_detail,
 };
 use crate::model::{Exemplar, LitMarginals, MaterialModel, ModelError, PeriodicPart, Result};
 use crate::mrf::noise::standard_normal;
@@ -75,10 +75,38 @@ pub struct SynthesisCache {
 /// An exemplar's basis fields copied onto the output with one quilt's patches.
 #[derive(Debug)]
 struct LaidExemplar {
-    /// One per L* basis crop (the mean, then the deviations).
-    lightness: Vec<Array2<f64>>,
-    /// One (a*, b*) pair per chroma basis field; empty without stored chroma.
-    chroma: Vec<[Array2<f64>; 2]>,
+    /// Where every output sample's exemplar sample lies.
+    placement: Placement,
+    /// The exemplar's basis as laid ([`exemplar_planes`]): the L* crops (the mean, then the
+    /// deviations), then an (a*, b*) pair per chroma basis field.
+    planes: Vec<Array2<f64>>,
+    /// How many of `planes` are L* crops.
+    lightness: usize,
+}
+
+impl LaidExemplar {
+    /// The L* detail of a subspace image with `coefficients` on the L* basis: the weighted
+    /// sum of the crops, laid on the output.
+    fn lightness(&self, coefficients: &[f64]) -> Array2<f64> {
+        self.laid_sum(coefficients.iter().zip(&self.planes[..self.lightness]))
+    }
+
+    /// The a* (`channel` 0) or b* (1) detail of a subspace image with `coefficients` on the
+    /// chroma basis.
+    fn chroma(&self, coefficients: &[f64], channel: usize) -> Array2<f64> {
+        let pairs = self.planes[self.lightness..].chunks_exact(2);
+        self.laid_sum(coefficients.iter().zip(pairs.map(|pair| &pair[channel])))
+    }
+
+    /// A weighted sum of basis planes, summed at the exemplar's size and laid once (laying is
+    /// linear, so this is the sum of the laid planes to the last bit).
+    fn laid_sum<'a>(&self, terms: impl Iterator<Item = (&'a f64, &'a Array2<f64>)>) -> Array2<f64> {
+        let mut sum = Array2::<f64>::zeros(self.placement.source());
+        for (&c, plane) in terms {
+            sum.scaled_add(c, plane);
+        }
+        self.placement.lay(&sum)
+    }
 }
 
 /// The driving noise of the bands by band seed. Every subspace image uses the same noise for a
@@ -323,28 +351,17 @@ impl MaterialModel {
             let sigma = detail_scale(e.rows, e.cols);
             // The plane's coarse part plus the laid crop's detail is the laid crop plus the
             // coarse part of their difference (the split is linear): one blur, not two.
-            let with_detail = |plane: &Array2<f64>, details: Vec<(f64, &Array2<f64>)>| {
-                let mut laid = Array2::<f64>::zeros(plane.dim());
-                for (c, field) in details {
-                    laid.scaled_add(c, field);
-                }
+            let with_detail = |plane: &Array2<f64>, laid: Array2<f64>| {
                 let (coarse, _) = split_detail(&(plane - &laid), sigma, o.tileable);
                 laid + coarse
             };
             if let Some(coefficients) = e.lightness.coefficients(k) {
-                colours[0] = with_detail(
-                    &colours[0],
-                    coefficients.into_iter().zip(&laid.lightness).collect(),
-                );
+                colours[0] = with_detail(&colours[0], laid.lightness(&coefficients));
             }
             if let Some(coefficients) = e.chroma.as_ref().and_then(|c| c.fields.coefficients(k)) {
                 for channel in 0..2 {
-                    let details = coefficients
-                        .iter()
-                        .zip(&laid.chroma)
-                        .map(|(&c, planes)| (c, &planes[channel]))
-                        .collect();
-                    colours[1 + channel] = with_detail(&colours[1 + channel], details);
+                    let detail = laid.chroma(&coefficients, channel);
+                    colours[1 + channel] = with_detail(&colours[1 + channel], detail);
                 }
             }
         }
@@ -617,8 +634,8 @@ impl MaterialModel {
         Some(cropped(resample_periodic(&torus, tr, tc), rows, cols))
     }
 
-    /// The exemplar's basis crops quilted onto the output torus with one layout (chosen on the
-    /// first subspace's crop, seeded by the synthesis seed), zero mean each; `None` without an
+    /// The exemplar's basis crops with one placement on the output (a quilt chosen on the
+    /// first subspace's crop, seeded by the synthesis seed); `None` without an
     /// exemplar. An exemplar registered with the range map is laid with the relief's own
     /// patches instead ([`MaterialModel::laid_together`]).
     fn exemplar_details(&self, o: &SynthesisOptions) -> Option<LaidExemplar> {
@@ -737,7 +754,7 @@ fn cropped(field: Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
 const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
 /// `guide` quilted for the output of `o` (on [`quilt_torus`], then cropped) with the
 /// exemplar's basis crops laid by the same patches ([`quilt_laid`]): the guide's quilt and
-/// the crops' copies; with a phase, every patch keeps the lattice's phase. The mean crop's
+/// the crops with their placement on the output; with a phase, every patch keeps the lattice's phase. The mean crop's
 /// colour (its a* and b*, and its L* when the guide is not itself a lightness) helps the
 /// guide choose the patches and cuts, so fewer cuts join two colours on one flat surface.
 fn laid_exemplar(
@@ -748,16 +765,14 @@ fn laid_exemplar(
 ) -> (Array2<f64>, LaidExemplar) {
     let torus = quilt_torus(o, patch_side(e.rows, e.cols));
     let (planes, matched) = exemplar_planes(e, guide_is_lightness);
-    let (guide, details) = quilt_laid(guide, &planes, &matched, torus, seed, phase);
-    let mut details = details.into_iter().map(|d| cropped(d, o.rows, o.cols));
-    let lightness = details.by_ref().take(e.lightness.basis.len()).collect();
-    let mut chroma = Vec::new();
-    while let (Some(a), Some(b)) = (details.next(), details.next()) {
-        chroma.push([a, b]);
-    }
+    let (guide, placement) = quilt_laid(guide, &planes, &matched, torus, seed, phase);
     (
         cropped(guide, o.rows, o.cols),
-        LaidExemplar { lightness, chroma },
+        LaidExemplar {
+            placement: placement.cropped(o.rows, o.cols),
+            planes,
+            lightness: e.lightness.basis.len(),
+        },
     )
 }
 

@@ -120,16 +120,14 @@ pub fn split_detail(field: &Array2<f64>, sigma: f64, wrap: bool) -> (Array2<f64>
     (field - &detail, detail)
 }
 
-/// Quilts `source` like [`quilt`] and lays each of `companions` (fields registered with it,
-/// same shape, e.g. the lightness of the images the relief was measured from) with the very
-/// same patches and cuts, so that structure shared by them (a pit in the relief and its dark
-/// colour) lines up in the output as in the measurement. Returns the source's quilt and one
-/// copy per companion: each output sample is the companion's sample under the patch that
-/// took it (the companions are copied, not integrated like the source: a copy costs no
-/// solve, and it keeps the companion's own values; measured on the built-in materials, the
-/// measured image quilted this way scored x0.89-1.34 the another-crop level, integrated
-/// x1.56-2.15). A companion's copy is linear in the companion: the copy of a weighted sum is
-/// the weighted sum of the copies.
+/// Quilts `source` like [`quilt`] and returns, beside the quilt, its [`Placement`]: where
+/// every output sample came from, so that fields registered with the source (same shape,
+/// e.g. the lightness of the images the relief was measured from) are laid with the very same
+/// patches and cuts, and structure shared by them (a pit in the relief and its dark colour)
+/// lines up in the output as in the measurement. A laid field is copied, not integrated like
+/// the source: a copy costs no solve, and it keeps the field's own values (measured on the
+/// built-in materials, the measured image quilted this way scored x0.89-1.34 the another-crop
+/// level, integrated x1.56-2.15).
 ///
 /// The companions listed in `matched` (indices into `companions`) also choose the patches and
 /// cut them: a candidate's misfit is the relief's plus theirs, each over its own variance, the
@@ -149,17 +147,68 @@ pub fn quilt_laid(
     (rows, cols): (usize, usize),
     seed: u64,
     phase: Option<&Phase>,
-) -> (Array2<f64>, Vec<Array2<f64>>) {
+) -> (Array2<f64>, Placement) {
     assert!(
         companions.iter().all(|c| c.dim() == source.dim()),
         "registered companions"
     );
-    let (heights, _, laid) = quilt_patches(source, companions, matched, rows, cols, seed, phase);
-    (heights, laid)
+    let (heights, _, placement) =
+        quilt_patches(source, companions, matched, rows, cols, seed, phase);
+    (heights, placement)
 }
 
-/// [`quilt`], with the index of the patch every sample came from, and `companions` laid with
-/// the same patches (see [`quilt_laid`]).
+/// Where each sample of a quilt came from: the source sample under the patch that took it.
+/// Laying a field registered with the source is a gather, linear in the field (the copy of a
+/// weighted sum is the weighted sum of the copies), so a sum of fields is summed at the
+/// source's size and laid once.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Placement {
+    /// Per output sample, the row-major index of its source sample.
+    from: Array2<u32>,
+    /// The source's shape (rows, cols).
+    source: (usize, usize),
+}
+
+impl Placement {
+    /// `field` (of the source's shape) copied onto the quilt's samples.
+    ///
+    /// # Panics
+    /// `field` is not of the source's shape.
+    pub fn lay(&self, field: &Array2<f64>) -> Array2<f64> {
+        assert_eq!(
+            field.dim(),
+            self.source,
+            "a field registered with the source"
+        );
+        // Row-major without a copy for the (usual) standard-layout field.
+        let field = field.as_standard_layout();
+        let values = field.as_slice().expect("standard layout is contiguous");
+        self.from.mapv(|i| values[i as usize])
+    }
+
+    /// The source's shape (rows, cols).
+    pub fn source(&self) -> (usize, usize) {
+        self.source
+    }
+
+    /// The top-left `rows` x `cols` of the placement (at least one sample, at most all).
+    pub fn cropped(self, rows: usize, cols: usize) -> Self {
+        let (r, c) = (
+            rows.clamp(1, self.from.nrows().max(1)),
+            cols.clamp(1, self.from.ncols().max(1)),
+        );
+        if (r, c) == self.from.dim() {
+            return self;
+        }
+        Self {
+            from: self.from.slice(ndarray::s![..r, ..c]).to_owned(),
+            source: self.source,
+        }
+    }
+}
+
+/// [`quilt`], with the index of the patch every sample came from and the [`Placement`] of
+/// every sample (see [`quilt_laid`]).
 fn quilt_patches(
     source: &Array2<f64>,
     companions: &[Array2<f64>],
@@ -168,9 +217,13 @@ fn quilt_patches(
     cols: usize,
     seed: u64,
     phase: Option<&Phase>,
-) -> (Array2<f64>, Array2<u32>, Vec<Array2<f64>>) {
+) -> (Array2<f64>, Array2<u32>, Placement) {
     let (sr, sc) = source.dim();
     assert!(sr > 0 && sc > 0 && rows > 0 && cols > 0, "empty quilt");
+    assert!(
+        u32::try_from(sr * sc).is_ok(),
+        "a source under 2^32 samples"
+    );
     let patch = patch_side(sr, sc);
     let overlap = (patch / OVERLAP_DIVISOR).max(1);
     let sigma = patch as f64 / 2.0;
@@ -265,34 +318,24 @@ fn quilt_patches(
     // cuts could not hide (a patch that fits its last neighbours on three or four sides only
     // roughly) is spread smoothly instead of left as a line of steps. The patches' lifts
     // wander; take out what the result holds above the patch scale, keep the source's mean.
-    // The companions are copied from the patches each sample came from (their raw values:
-    // the caller keeps what scale of them it wants).
-    let (mut out, laid) = rayon::join(
+    // Fields laid with the quilt are copied from the patches each sample came from (their
+    // raw values: the caller keeps what scale of them it wants).
+    let (mut out, from) = rayon::join(
         || integrate_detail_on_torus(&right, &down, sigma),
         || {
-            if companions.is_empty() {
-                return Vec::new();
-            }
-            // The source sample (row-major index) under every output sample, found once for
-            // all companions.
-            let from = Array2::from_shape_fn((rows, cols), |(r, col)| {
+            Array2::from_shape_fn((rows, cols), |(r, col)| {
                 let [r0, c0, y0, x0] = placements[label[(r, col)] as usize];
                 let (y, x) = ((r + rows - r0) % rows, (col + cols - c0) % cols);
-                (y0 + y) % sr * sc + (x0 + x) % sc
-            });
-            companions
-                .par_iter()
-                .map(|c| {
-                    // Row-major without a copy for the (usual) standard-layout companion.
-                    let c = c.as_standard_layout();
-                    let values = c.as_slice().expect("standard layout is contiguous");
-                    from.mapv(|i| values[i])
-                })
-                .collect::<Vec<_>>()
+                ((y0 + y) % sr * sc + (x0 + x) % sc) as u32
+            })
         },
     );
     out += source.mean().unwrap_or(0.0) - out.mean().unwrap_or(0.0);
-    (out, label, laid)
+    let placement = Placement {
+        from,
+        source: (sr, sc),
+    };
+    (out, label, placement)
 }
 
 /// `field` minus its Gaussian blur of standard deviation `sigma` samples (edges repeated, or
@@ -976,14 +1019,9 @@ mod tests {
         let companion = source.mapv(|v| 3.0 - 2.0 * v);
         let other = ridges(60, 70, 12);
         let mix = &other * 0.5 - &companion * 2.0;
-        let (heights, laid) = quilt_laid(
-            &source,
-            &[source.clone(), companion, other.clone(), mix],
-            &[],
-            (150, 130),
-            4,
-            None,
-        );
+        let fields = [source.clone(), companion, other.clone(), mix];
+        let (heights, placement) = quilt_laid(&source, &fields, &[], (150, 130), 4, None);
+        let laid: Vec<Array2<f64>> = fields.iter().map(|f| placement.lay(f)).collect();
         assert_eq!(heights, alone);
         assert!(laid.iter().all(|l| l.dim() == (150, 130)));
         // The source's own copy follows its integrated quilt (the same patches; the quilt
@@ -1010,15 +1048,11 @@ mod tests {
             assert_eq!(m, o * 0.5 - c * 2.0, "sample {p}");
         }
         // Another seed lays the companion otherwise.
-        let (_, again) = quilt_laid(
-            &source,
-            std::slice::from_ref(&other),
-            &[],
-            (150, 130),
-            5,
-            None,
-        );
-        assert_ne!(again[0], laid[2]);
+        let (_, again) = quilt_laid(&source, &[], &[], (150, 130), 5, None);
+        assert_ne!(again.lay(&other), laid[2]);
+        // A crop of the placement lays the crop of the laid field.
+        let crop = placement.cropped(100, 64).lay(&other);
+        assert_eq!(crop, laid[2].slice(ndarray::s![..100, ..64]));
     }
 
     #[test]
@@ -1033,9 +1067,10 @@ mod tests {
         });
         let steps = |matched: &[usize]| {
             let companions = std::slice::from_ref(&colour);
-            let (_, patch, laid) = quilt_patches(&source, companions, matched, 150, 130, 4, None);
+            let (_, patch, placement) =
+                quilt_patches(&source, companions, matched, 150, 130, 4, None);
             neighbour_steps(&Quilt {
-                heights: laid[0].clone(),
+                heights: placement.lay(&colour),
                 patch,
             })
         };
