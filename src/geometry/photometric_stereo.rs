@@ -129,13 +129,13 @@ fn fit_pixel(
     let hi = (n - (n as f64 * HIGHLIGHT_FRACTION) as usize)
         .max(lo + 3)
         .min(n);
-    let bright = &order[hi..];
     let mut fit = solve(lights, &order[lo..hi], &intensity)?;
+    // The brightest (order[hi..]) stay out as highlights.
     for _ in 0..REFINEMENTS {
-        let kept: Vec<usize> = order
+        let kept: Vec<usize> = order[..hi]
             .iter()
             .copied()
-            .filter(|j| !bright.contains(j) && lit_by_fit(&fit, lights[*j].1, intensity(*j)))
+            .filter(|&j| lit_by_fit(&fit, lights[j].1, intensity(j)))
             .collect();
         match solve(lights, &kept, &intensity) {
             Some(refined) => fit = refined,

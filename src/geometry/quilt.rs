@@ -456,12 +456,10 @@ fn choose(
         return (y, x, 0.0);
     }
     let fits_inside = hr <= sr && hc <= sc;
-    let mut coarse = known.on_rows(guide.channels, |y| y % COARSE_STRIDE == 0);
-    if coarse.at.is_empty() {
-        // A thin band on rows the stride skips (tiny patches): score on all of it.
-        coarse = known.on_rows(guide.channels, |_| true);
-    }
-    let rough = guide.misfits(&candidates, &coarse, fits_inside);
+    let coarse = known.on_rows(guide.channels, |y| y % COARSE_STRIDE == 0);
+    // A thin band on rows the stride skips (tiny patches) is scored on all of it.
+    let rough_known = if coarse.at.is_empty() { known } else { &coarse };
+    let rough = guide.misfits(&candidates, rough_known, fits_inside);
     let mut order: Vec<usize> = (0..candidates.len()).collect();
     order.sort_by(|&a, &b| rough[a].0.total_cmp(&rough[b].0));
     let shortlist: Vec<(usize, usize)> = order
