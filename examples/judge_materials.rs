@@ -9,7 +9,8 @@
 //!
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
 //! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--verbose]
-//! [--sheet DIR] [--seed N] [--pair-rank K]`; `--seed` sets the synthesis seed (default 1;
+//! [--sheet DIR] [--seed N] [--pair-rank K] [--shadows attached|cast]`; `--shadows` forces the
+//! range map's shadows (default: analysis chooses); `--seed` sets the synthesis seed (default 1;
 //! one seed's figures move by about 0.1-0.3 crop levels from seed to seed); `--pair-rank K` is
 //! an experiment: every judged image gets the L* table of its own light rebuilt from the mean
 //! and K principal components (8-bit coefficients) of the tables of all frontal lights, as
@@ -27,6 +28,7 @@ use btfmrf::btf::{Btf, Direction};
 use btfmrf::decompose::ColourSpace;
 use btfmrf::eval::Yardstick;
 use btfmrf::eval::montage::montage;
+use btfmrf::geometry::relight::Shadows;
 use btfmrf::model::ModelKind;
 use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
@@ -165,6 +167,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             "--no-colour-tables" => options.colour_matching = false,
             "--no-lit-tables" => options.lit_matching = false,
+            "--shadows" => {
+                options.shadows = match args.next().ok_or("--shadows attached|cast")?.as_str() {
+                    "attached" => Some(Shadows::Attached),
+                    "cast" => Some(Shadows::Cast),
+                    other => return Err(format!("--shadows {other}: attached or cast").into()),
+                }
+            }
             "--verbose" => verbose = true,
             "--seed" => seed = args.next().ok_or("--seed N")?.parse()?,
             "--pair-rank" => rank = Some(args.next().ok_or("--pair-rank K")?.parse()?),
@@ -275,13 +284,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let n = LIGHTS.len() as f64;
         use btfmrf::model::format;
         println!(
-            "{material} {kind} ({} bytes: exemplar {}, colour tables {}, lit tables {}, periodic {}, range map {}): x{:.2} the crop level (geometric mean), {:.2} Lab",
+            "{material} {kind} ({} bytes: exemplar {}, colour tables {}, lit tables {}, periodic {}, range map {}, {:?} shadows): x{:.2} the crop level (geometric mean), {:.2} Lab",
             format::to_bytes(&model).len(),
             format::exemplar_bytes(&model),
             format::colour_marginal_bytes(&model),
             format::lit_marginal_bytes(&model),
             format::periodic_bytes(&model),
             model.range_map().map_or(0, |m| 2 * m.rows * m.cols),
+            model.range_map().map(|m| m.shadows),
             (log_ratio / n).exp(),
             colour / n
         );

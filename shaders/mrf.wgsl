@@ -2,11 +2,17 @@
 // plain), after common.wgsl. The CPU reference is src/synthesis.rs (image_from_cache,
 // bump_relight); the buffers are built in crates/render/src/mrf.rs.
 //
-// Globals.params here: y = 1 when the model has a range map, z = displacement scale (world
-// units per height texel), w = unused. Lights at or beyond the set's lowest light
-// (globals.limits.z) leave a fragment black.
+// Globals.params here: y = the tile's side in texels when the model has a range map (0
+// without), z = displacement scale (world units per height texel), w = the highest relief
+// height (tile texels above the mean) when the range map casts shadows, negative when it does
+// not.
+// Lights at or beyond the set's lowest light (globals.limits.z) leave a fragment black.
 
 const SHADING_GRID: u32 = 64u;
+// Most one-texel steps of a shadow ray (the CPU's MAX_SHADOW_STEPS).
+const MAX_SHADOW_STEPS: u32 = 256u;
+// Height a sample must rise above a shadow ray to block it (the CPU's SHADOW_TOLERANCE).
+const SHADOW_TOLERANCE: f32 = 0.05;
 const NO_LAYER: u32 = 0xffffffffu;
 
 // The synthesized subspace images (tileable), one layer per synthesized cluster.
@@ -22,6 +28,9 @@ const NO_LAYER: u32 = 0xffffffffu;
 @group(0) @binding(10) var<storage, read> light_strength: array<f32>;
 // Per (view * lights + light), the measured pair's gain (MaterialModel::pair_gain).
 @group(0) @binding(11) var<storage, read> pair_gain: array<f32>;
+// The range map's heights (tile texels above their mean) in single precision, read unfiltered
+// for the cast shadows (1 x 1 when the map casts none).
+@group(0) @binding(12) var shadow_heights: texture_2d<f32>;
 
 // Mean of max(0, n . l) over the texture for the projected tangent-frame light direction q
 // (bilinear in the table).
@@ -35,6 +44,50 @@ fn mean_shading(q: vec2<f32>) -> f32 {
     let top = mix(mean_shade[i], mean_shade[i + 1u], t.x);
     let bottom = mix(mean_shade[i + SHADING_GRID], mean_shade[i + SHADING_GRID + 1u], t.x);
     return mix(top, bottom, t.y);
+}
+
+// The shadow heights at texel coordinates p (texel centres at integers), bilinear between
+// the four texels around it, wrapped (the CPU's ShadowMarch reads its heights so).
+fn shadow_height(p: vec2<f32>) -> f32 {
+    let n = vec2<i32>(textureDimensions(shadow_heights));
+    let f = floor(p);
+    let t = p - f;
+    let i = vec2<i32>(f);
+    let h = array<f32, 4>(
+        textureLoad(shadow_heights, ((i % n) + n) % n, 0).r,
+        textureLoad(shadow_heights, ((i + vec2<i32>(1, 0)) % n + n) % n, 0).r,
+        textureLoad(shadow_heights, ((i + vec2<i32>(0, 1)) % n + n) % n, 0).r,
+        textureLoad(shadow_heights, ((i + vec2<i32>(1, 1)) % n + n) % n, 0).r,
+    );
+    return mix(mix(h[0], h[1], t.x), mix(h[2], h[3], t.x), t.y);
+}
+
+// 1 where the tangent-frame light l reaches the relief at uv, 0 where the relief casts a
+// shadow on it (ShadowMarch on the CPU): one-texel steps towards the light over the heights,
+// until the ray rises above the highest one.
+fn cast_light(uv: vec2<f32>, l: vec3<f32>) -> f32 {
+    let top = globals.params.w;
+    let horizontal = length(l.xy);
+    if (top < 0.0 || horizontal < 1e-6) {
+        return 1.0;
+    }
+    let size = f32(textureDimensions(shadow_heights).x);
+    // uv's v runs down the rows, the light's y up; heights are in tile texels.
+    let dir = vec2<f32>(l.x, -l.y) / horizontal;
+    let rise = l.z / horizontal * globals.params.y / size;
+    let p = uv * size - vec2<f32>(0.5);
+    let z = shadow_height(p) + SHADOW_TOLERANCE;
+    let steps = min(u32(size), MAX_SHADOW_STEPS);
+    for (var t = 1u; t <= steps; t++) {
+        let ray = z + f32(t) * rise;
+        if (ray >= top) {
+            return 1.0;
+        }
+        if (shadow_height(p + f32(t) * dir) > ray) {
+            return 0.0;
+        }
+    }
+    return 1.0;
 }
 
 // The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
@@ -82,7 +135,7 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
             for (var b = 0; b < 3; b++) {
                 k += il.weight[b] * light_strength[il.index[b]];
             }
-            let s = max(dot(relief_here.xyz, l), 0.0) / mean;
+            let s = max(dot(relief_here.xyz, l), 0.0) * cast_light(in.uv, l) / mean;
             colour *= max(1.0 + k * (s - 1.0), SHADING_FLOOR);
         }
     }

@@ -18,7 +18,7 @@ use crate::decompose::marginals::{self, MarginalMap};
 use crate::decompose::{Border, ColourSpace, Pyramid};
 use crate::geometry::integrate::{Edges, normals_of, normals_of_periodic};
 use crate::geometry::lattice::{self, Lattice};
-use crate::geometry::relight::{SHADING_FLOOR, shading_factor};
+use crate::geometry::relight::{SHADING_FLOOR, Shading, shading_factor};
 use crate::geometry::{
     Phase, Placement, detail_scale, patch_side, quilt, quilt_laid, resample_periodic, split_detail,
 };
@@ -383,7 +383,7 @@ impl MaterialModel {
         if let (Some(lit), Some(heights), Some(map)) = (&s.lit_marginals, heights, self.range_map())
             && let Some(light) = self.lights().get(lit_light)
             && let Some(factor) =
-                relief_factor(heights, o.edges(), light, map.strength_of(lit_light))
+                relief_factor(heights, o.edges(), light, map.shading_of(lit_light))
         {
             match_lit(&mut image, &factor, lit);
         }
@@ -535,8 +535,8 @@ impl MaterialModel {
         }
         let mut out = out.unwrap_or_else(|| Array3::zeros((3, o.rows, o.cols)));
         if let Some(heights) = &cache.heights {
-            let strength = self.bump_strength(light)?;
-            bump_relight(&mut out, heights, o.edges(), light, strength);
+            let shading = self.bump_shading(light)?;
+            bump_relight(&mut out, heights, o.edges(), light, shading);
         }
         Ok(out)
     }
@@ -676,22 +676,24 @@ impl MaterialModel {
         Some(laid_exemplar(&map.samples(), e, o, (seed, None, false)))
     }
 
-    /// The bump strength for `light`: the measured lights' fitted strengths
+    /// How the relief shades `light`: the measured lights' fitted strengths
     /// ([`crate::geometry::relight`]) blended with the same barycentric weights as the images,
-    /// so it changes continuously with the light; 1 without stored strengths.
+    /// so it changes continuously with the light (1 without stored strengths), and the range
+    /// map's shadows.
     ///
     /// # Errors
     /// A non-finite direction.
-    pub fn bump_strength(&self, light: &Direction) -> Result<f64> {
+    pub fn bump_shading(&self, light: &Direction) -> Result<Shading> {
         let Some(map) = self.range_map() else {
-            return Ok(1.0);
+            return Ok(Shading::LAMBERT);
         };
-        Ok(self
-            .lights()
-            .interpolate(light)?
-            .iter()
-            .map(|w| w.weight * map.strength_of(w.index))
-            .sum())
+        Ok(map.shading_at(
+            self.lights()
+                .interpolate(light)?
+                .iter()
+                .map(|w| w.weight * map.strength_of(w.index))
+                .sum(),
+        ))
     }
 }
 
@@ -816,9 +818,9 @@ pub fn bump_relight(
     heights: &Array2<f64>,
     border: Edges,
     light: &Direction,
-    strength: f64,
+    shading: Shading,
 ) {
-    let Some(factor) = relief_factor(heights, border, light, strength) else {
+    let Some(factor) = relief_factor(heights, border, light, shading) else {
         return;
     };
     image
@@ -836,10 +838,10 @@ pub fn relief_factor(
     heights: &Array2<f64>,
     border: Edges,
     light: &Direction,
-    strength: f64,
+    shading: Shading,
 ) -> Option<Array2<f64>> {
     let l = light.vector();
-    shading_factor(heights, border, [l[0], l[1], l[2]], strength)
+    shading_factor(heights, border, [l[0], l[1], l[2]], shading)
         .map(|f| f.mapv(|s| s.max(SHADING_FLOOR)))
 }
 
@@ -856,7 +858,7 @@ mod tests {
         });
         let light = Direction::new(70.0, 0.0);
         let l = light.vector();
-        let factor = shading_factor(&heights, Edges::Clamp, l, 1.0).unwrap();
+        let factor = shading_factor(&heights, Edges::Clamp, l, Shading::LAMBERT).unwrap();
         assert!(
             factor.iter().any(|&f| f < SHADING_FLOOR),
             "no deep shadow to test"
@@ -867,8 +869,14 @@ mod tests {
             (0.05 + 0.1 * c as f64 + 0.3 * factor[[y, x]] + 0.002 * ((x * 7 + y) % 5) as f64) as f32
         });
         let mut texture = photo.clone();
-        crate::geometry::relight::remove_shading(&mut texture, &heights, l, 1.0);
-        bump_relight(&mut texture, &heights, Edges::Clamp, &light, 1.0);
+        crate::geometry::relight::remove_shading(&mut texture, &heights, l, Shading::LAMBERT);
+        bump_relight(
+            &mut texture,
+            &heights,
+            Edges::Clamp,
+            &light,
+            Shading::LAMBERT,
+        );
         for (a, b) in texture.iter().zip(&photo) {
             assert!((a - b).abs() < 1e-5, "{a} vs {b}");
         }

@@ -331,3 +331,26 @@ fn the_enlarged_range_map_is_not_a_grid_of_copies() {
     // 0.010), either the leaf's straight stem or a straight cut; see the report.
     assert!(top.is_finite() && typical > 0.0);
 }
+
+/// A relief's cast shadows: analysis lets the range map cast them where they explain the
+/// frontal photographs clearly better than attached shadows alone. The built-in stones and
+/// sponge are rendered with cast shadows and show them (residual with cast shadows over
+/// without, 128^2: 0.67 and 0.53); the leather's shallow grain casts almost none (1.01).
+#[test]
+fn a_relief_casts_the_shadows_its_photographs_show() {
+    use btfmrf::analysis::{AnalysisOptions, analyze};
+    use btfmrf::geometry::relight::Shadows;
+    for (material, chosen) in [
+        (SyntheticMaterial::Stones, Shadows::Cast),
+        (SyntheticMaterial::Sponge, Shadows::Cast),
+        (SyntheticMaterial::Leather, Shadows::Attached),
+    ] {
+        let btf = SyntheticBtf::new(material, 64, 3).unwrap().into_btf();
+        let options = AnalysisOptions {
+            clusters: 8,
+            ..AnalysisOptions::default()
+        };
+        let (model, _) = analyze(&btf, &options, &NoProgress).unwrap();
+        assert_eq!(model.range_map().unwrap().shadows, chosen, "{material}");
+    }
+}

@@ -153,7 +153,7 @@ pub enum Edges {
 }
 
 impl Edges {
-    fn index(self, i: isize, n: usize) -> usize {
+    pub(crate) fn index(self, i: isize, n: usize) -> usize {
         match self {
             Edges::Clamp => i.clamp(0, n as isize - 1) as usize,
             Edges::Wrap => i.rem_euclid(n as isize) as usize,

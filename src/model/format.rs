@@ -14,6 +14,7 @@ use crate::decompose::colour_transfer::{ColourMarginals, Coupling, DIRECTIONS, L
 use crate::decompose::marginals::{BAND_QUANTILES, QUANTILES, QuantileGrid};
 use crate::decompose::{ColourSpace, KlBasis};
 use crate::geometry::lattice::Lattice;
+use crate::geometry::relight::Shadows;
 pub use crate::io::bytes::{Parse, Reader};
 use crate::io::envelope;
 use crate::mrf::{AnyLevels, BandModel, KindVisitor, Levels, LevelsVisitor, ModelKind};
@@ -24,9 +25,9 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// marginals: linear RGB KL), version 2 files (no joint colour tables) and version 3 files (no
 /// periodic part), version 4 files (one exemplar crop with a gain per subspace), version 5
 /// files (no exemplar chroma), version 6 files (no chroma-lightness coupling), version 7
-/// files (no lit lightness tables) and version 8 files (exemplar L* deviations always 8-bit)
-/// are still read.
-pub const VERSION: u16 = 9;
+/// files (no lit lightness tables), version 8 files (exemplar L* deviations always 8-bit) and
+/// version 9 files (no cast shadows) are still read.
+pub const VERSION: u16 = 10;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -134,7 +135,12 @@ pub fn to_payload(model: &MaterialModel) -> Vec<u8> {
     match model.range_map() {
         None => w.u8(0),
         Some(r) => {
-            w.u8(if r.strength.is_empty() { 1 } else { 2 });
+            // 1: heights alone; 2: and strengths; 3: and cast shadows.
+            w.u8(match (r.strength.is_empty(), r.shadows) {
+                (true, _) => 1,
+                (false, Shadows::Attached) => 2,
+                (false, Shadows::Cast) => 3,
+            });
             w.u16(r.rows as u16);
             w.u16(r.cols as u16);
             w.u16(r.step as u16);
@@ -695,7 +701,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     }
     let range_map = match r.u8()? {
         0 => None,
-        flag @ (1 | 2) => {
+        flag @ (1..=3) => {
             let (rows, cols) = (usize::from(r.u16()?), usize::from(r.u16()?));
             let step = usize::from(r.u16()?);
             if rows == 0 || cols == 0 || step == 0 {
@@ -706,7 +712,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
                 .into_iter()
                 .map(|h| h as f32)
                 .collect();
-            let strength = if flag == 2 {
+            let strength = if flag >= 2 {
                 let n = usize::from(r.u16()?);
                 if n != lights.len() {
                     return Err(format!("{n} bump strengths for {} lights", lights.len()));
@@ -725,6 +731,11 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
                 cols,
                 step,
                 strength,
+                shadows: if flag == 3 {
+                    Shadows::Cast
+                } else {
+                    Shadows::Attached
+                },
             })
         }
         f => return Err(format!("unknown range map flag {f}")),

@@ -10,6 +10,7 @@ use crate::decompose::marginals::BAND_QUANTILES;
 use crate::decompose::marginals::{QuantileGrid, Quantiles};
 use crate::decompose::pyramid::{Taps, apply_separable, pyramid_step};
 use crate::geometry::lattice::{Lattice, MIN_PERIOD};
+use crate::geometry::relight::{Shading, Shadows};
 use crate::mrf::{AnyLevels, ModelKind};
 
 impl std::str::FromStr for ModelKind {
@@ -98,6 +99,9 @@ pub struct RangeMap {
     /// Bump strength per measured light ([`crate::geometry::relight`]), fitted to the frontal
     /// images; empty in files from before it was stored, which means 1 for every light.
     pub strength: Vec<f32>,
+    /// Which shadows the relief casts when it relights an image (attached only in files from
+    /// before cast shadows were stored).
+    pub shadows: Shadows,
 }
 
 impl RangeMap {
@@ -131,6 +135,19 @@ impl RangeMap {
     /// The bump strength fitted for measured light `light` (1 where none was stored).
     pub fn strength_of(&self, light: usize) -> f64 {
         self.strength.get(light).map_or(1.0, |&k| f64::from(k))
+    }
+
+    /// How the relief shades measured light `light`: its fitted strength and the map's shadows.
+    pub fn shading_of(&self, light: usize) -> Shading {
+        self.shading_at(self.strength_of(light))
+    }
+
+    /// The map's shadows at bump strength `strength`.
+    pub fn shading_at(&self, strength: f64) -> Shading {
+        Shading {
+            strength,
+            shadows: self.shadows,
+        }
     }
 }
 
@@ -843,6 +860,7 @@ mod tests {
             cols: 3,
             step: 1,
             strength: Vec::new(),
+            shadows: Shadows::Attached,
         };
         let e = refused(|p| p.range_map = Some(flat_map(5)));
         assert!(e.contains("range map of 5 samples as 2x3"), "{e}");

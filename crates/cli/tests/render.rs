@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction, io};
+use btfmrf::geometry::relight::Shadows;
 use btfmrf::lpca::{self, LpcaModel, LpcaOptions, Method};
 use btfmrf::model::{MaterialModel, format};
 use btfmrf::progress::NoProgress;
@@ -101,12 +102,15 @@ fn flat_scene(side: u32, light: Direction) -> Scene {
 
 /// Renders `model` on a flat plane, seen from above, under each of `lights` (directional) and
 /// compares with the CPU's [`MaterialModel::image_from_cache`]: the same clusters
-/// synthesized, and at most 1% of the peak apart anywhere, 0.1% on average.
+/// synthesized, and at most 1% of the peak apart anywhere but in a share `flipped` of the
+/// pixels (a hard shadow's edge that the GPU's half-precision heights move by a texel), 0.1%
+/// on average.
 fn assert_gpu_matches_cpu(
     renderer: &Renderer,
     model: &MaterialModel,
     name: &str,
     lights: &[Direction],
+    flipped: f64,
 ) {
     let side = 128;
     let mesh = Mesh::plane(4, 1.0);
@@ -145,11 +149,12 @@ fn assert_gpu_matches_cpu(
         let scale = cpu.iter().fold(0.0f32, |m, &x| m.max(x.abs())).max(1e-3);
         let max = err.iter().fold(0.0f32, |m, &x| m.max(x));
         let mean = err.mean().unwrap();
+        let over = err.iter().filter(|&&e| e > 0.01 * scale).count();
         eprintln!(
-            "{name}, light {light:?}: max |gpu - cpu| = {max:.5} ({:.3}% of the peak {scale:.3}), mean {mean:.6}",
+            "{name}, light {light:?}: max |gpu - cpu| = {max:.5} ({:.3}% of the peak {scale:.3}), mean {mean:.6}, {over} pixels over 1%",
             100.0 * max / scale
         );
-        if max > 0.01 * scale || mean > 0.001 * scale {
+        if over as f64 > flipped * err.len() as f64 || mean > 0.001 * scale {
             let path = write_diff(&format!("{name}-{i}"), &gpu.image, &cpu);
             panic!(
                 "{name}: GPU and CPU differ for light {light:?}: max {max}, mean {mean} (peak {scale}); diff image {}",
@@ -168,7 +173,7 @@ fn gpu_equals_the_cpu_reference_on_a_flat_plane() {
         Direction::new(37.0, 100.0),
         Direction::new(68.0, 250.0),
     ];
-    assert_gpu_matches_cpu(&renderer, &golden_model(), "plane", &lights);
+    assert_gpu_matches_cpu(&renderer, &golden_model(), "plane", &lights, 0.0);
 }
 
 #[test]
@@ -189,7 +194,26 @@ fn the_gpu_applies_the_measured_bump_strength_per_light() {
         Direction::new(37.0, 100.0),
         Direction::new(68.0, 250.0),
     ];
-    assert_gpu_matches_cpu(&renderer, &model, "strength", &lights);
+    assert_gpu_matches_cpu(&renderer, &model, "strength", &lights, 0.0);
+}
+
+#[test]
+fn the_gpu_casts_the_relief_shadows_as_the_cpu_does() {
+    let Some(renderer) = renderer() else { return };
+    let mut parts = golden_model().into_parts();
+    parts
+        .range_map
+        .as_mut()
+        .expect("the golden model has a range map")
+        .shadows = Shadows::Cast;
+    let model = MaterialModel::new(parts).unwrap();
+    // Low lights cast long shadows over the sponge's pores.
+    let lights = [
+        Direction::new(60.0, 60.0),
+        Direction::new(75.0, 200.0),
+        Direction::new(37.0, 100.0),
+    ];
+    assert_gpu_matches_cpu(&renderer, &model, "shadows", &lights, 0.002);
 }
 
 #[test]
@@ -215,7 +239,7 @@ fn lights_below_the_horizon_clamp_at_the_sets_lowest_light_as_on_the_cpu() {
     parts.range_map = None;
     let model = MaterialModel::new(parts).unwrap();
     let lights = [Direction::new(93.0, 30.0), Direction::new(60.0, 200.0)];
-    assert_gpu_matches_cpu(&renderer, &model, "below-horizon", &lights);
+    assert_gpu_matches_cpu(&renderer, &model, "below-horizon", &lights, 0.0);
 }
 
 fn golden_scene(light: Direction) -> Scene {

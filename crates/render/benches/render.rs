@@ -41,15 +41,7 @@ fn frames(c: &mut Criterion) {
         )
         .unwrap();
     let tables = MaterialTables::new(&model, &cache, None).unwrap();
-    let heights = model.range_heights(cache.options());
-    let material = GpuMaterial::new(
-        &renderer.ctx,
-        &renderer.mrf,
-        &cache,
-        heights.as_ref(),
-        &tables,
-    )
-    .unwrap();
+    let material = GpuMaterial::new(&renderer.ctx, &renderer.mrf, &cache, &tables).unwrap();
     let scene = Scene {
         camera: Camera::orbit(Direction::new(30.0, 270.0), 3.2),
         light: Light {

@@ -368,15 +368,11 @@ impl Renderer {
     ) -> Result<RenderOutput<MrfStats>> {
         let (rows, cols) = (cache.options().rows, cache.options().cols);
         let model = job.model;
-        let heights = match job.mapping {
-            Mapping::Displacement => model.range_heights(cache.options()),
-            Mapping::Bump | Mapping::Plain => None,
-        };
         let tables =
             MaterialTables::new(model, cache, Some(job.luts))?.at_resolution(plan.texture_size)?;
         let synthesis_seconds = job.start.elapsed().as_secs_f64();
         let start = Instant::now();
-        let material = GpuMaterial::new(&self.ctx, &self.mrf, cache, heights.as_ref(), &tables)?;
+        let material = GpuMaterial::new(&self.ctx, &self.mrf, cache, &tables)?;
         let gpu_mesh = GpuMesh::new(&self.ctx, job.mesh);
         let image = self.render(&material, &gpu_mesh, job.scene, job.mapping)?;
         Ok(RenderOutput {

@@ -14,8 +14,11 @@
 //! `max(0, n . l)` over the texture; [`MeanShading`] tabulates it on a grid of light
 //! directions (bilinear in between).
 
-use ndarray::Array3;
+use ndarray::{Array2, Array3};
 use rayon::prelude::*;
+
+use btfmrf::geometry::integrate::Edges;
+use btfmrf::geometry::relight::ShadowField;
 
 use btfmrf::btf::directions::{closest_point_in_triangle, project};
 use btfmrf::btf::{Direction, DirectionSet};
@@ -28,6 +31,8 @@ pub const DIRECTION_GRID: usize = 128;
 pub const SHADING_GRID: usize = 64;
 /// The largest number of normals (a strided subsample) averaged per mean-shading node.
 pub const SHADING_SAMPLES: usize = 128 * 128;
+/// The same where each sample also marches a shadow ray per node (a relief casting shadows).
+pub const SHADOW_SAMPLES: usize = 128 * 128;
 
 const HALF_PI: f64 = std::f64::consts::FRAC_PI_2;
 
@@ -148,17 +153,29 @@ impl MeanShading {
     /// [`SHADING_SAMPLES`] normals (a regular strided subsample; all of them for textures up
     /// to 128 x 128).
     pub fn new(normals: &Array3<f64>) -> Self {
+        Self::tabulate(normals, None)
+    }
+
+    /// The same with the cast shadows of the tileable `heights` (texels, registered with
+    /// `normals`; [`ShadowField`]), over at most [`SHADOW_SAMPLES`] samples.
+    pub fn with_cast_shadows(normals: &Array3<f64>, heights: &Array2<f64>) -> Self {
+        Self::tabulate(normals, Some(ShadowField::new(heights, Edges::Wrap)))
+    }
+
+    fn tabulate(normals: &Array3<f64>, shadows: Option<ShadowField>) -> Self {
         let (_, h, w) = normals.dim();
-        let stride = ((h * w) as f64 / SHADING_SAMPLES as f64)
-            .sqrt()
-            .ceil()
-            .max(1.0) as usize;
-        let samples: Vec<[f64; 3]> = (0..h)
+        let most = if shadows.is_some() {
+            SHADOW_SAMPLES
+        } else {
+            SHADING_SAMPLES
+        };
+        let stride = ((h * w) as f64 / most as f64).sqrt().ceil().max(1.0) as usize;
+        let samples: Vec<(usize, usize, [f64; 3])> = (0..h)
             .step_by(stride)
             .flat_map(|y| {
                 (0..w)
                     .step_by(stride)
-                    .map(move |x| [0, 1, 2].map(|c| normals[[c, y, x]]))
+                    .map(move |x| (y, x, [0, 1, 2].map(|c| normals[[c, y, x]])))
             })
             .collect();
         let n = SHADING_GRID;
@@ -166,9 +183,16 @@ impl MeanShading {
             .into_par_iter()
             .map(|i| {
                 let l = node_vector(i % n, i / n);
+                let march = shadows.and_then(|f| f.towards(l));
                 let sum: f64 = samples
                     .iter()
-                    .map(|s| (s[0] * l[0] + s[1] * l[1] + s[2] * l[2]).max(0.0))
+                    .map(|&(y, x, s)| {
+                        let shade = (s[0] * l[0] + s[1] * l[1] + s[2] * l[2]).max(0.0);
+                        match &march {
+                            Some(m) if shade > 0.0 && !m.lit(y, x) => 0.0,
+                            _ => shade,
+                        }
+                    })
                     .sum();
                 (sum / samples.len().max(1) as f64) as f32
             })

@@ -13,6 +13,7 @@ use super::pipeline::{
 };
 use super::scene::Scene;
 use super::{GpuContext, Mapping, RenderError, Result};
+use btfmrf::geometry::relight::Shadows;
 use btfmrf::model::MaterialModel;
 use btfmrf::synthesis::SynthesisCache;
 
@@ -52,8 +53,12 @@ pub struct MaterialTables {
     pub view_lut: DirectionLut,
     /// See `view_lut`.
     pub light_lut: DirectionLut,
-    /// Mean shading of the range map's normals (`None` without a range map).
+    /// Mean shading of the range map's normals (`None` without a range map), with its cast
+    /// shadows where the map casts them.
     pub mean_shading: Option<MeanShading>,
+    /// Where the range map casts shadows: its highest height above its mean, tile texels (the
+    /// shader's shadow rays are free above it).
+    pub shadow_top: Option<f32>,
     /// Per measured light, the bump strength `k` of the shading factor `1 + k (s - 1)`
     /// ([`btfmrf::geometry::relight`]; 1 where the model stores none).
     pub light_strength: Vec<f32>,
@@ -85,6 +90,12 @@ impl MaterialTables {
             layer_of[k] = layer as u32;
         }
         let (nv, nl) = (model.views().len(), model.lights().len());
+        // The heights whose shadows the shader casts.
+        let cast = cache.heights().filter(|_| {
+            model
+                .range_map()
+                .is_some_and(|m| m.shadows == Shadows::Cast)
+        });
         // The cluster table is view-major, like the pair layers.
         let pair_layer = model
             .cluster_table()
@@ -103,7 +114,14 @@ impl MaterialTables {
             counts: (nv, nl),
             view_lut,
             light_lut,
-            mean_shading: cache.normals().map(MeanShading::new),
+            mean_shading: cache.normals().map(|n| match cast {
+                Some(h) => MeanShading::with_cast_shadows(n, h),
+                None => MeanShading::new(n),
+            }),
+            shadow_top: cast.map(|h| {
+                let top = h.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                (top - h.mean().unwrap_or(0.0)) as f32
+            }),
             light_strength: (0..nl)
                 .map(|l| model.range_map().map_or(1.0, |m| m.strength_of(l)) as f32)
                 .collect(),
@@ -145,6 +163,28 @@ pub struct GpuMaterial {
     pub tile: usize,
     /// True when the model has a range map.
     pub has_relief: bool,
+    /// See [`MaterialTables::shadow_top`].
+    pub shadow_top: Option<f32>,
+}
+
+/// The mean-centred heights (tile texels, a square tile) for the shader's cast shadows, each
+/// texel the mean of a `2^skip`-texel square (the texture's side is the tile's over `2^skip`),
+/// row-major.
+fn shadow_heights(heights: &Array2<f64>, skip: u32) -> Vec<f32> {
+    let mean = heights.mean().unwrap_or(0.0);
+    let block = 1usize << skip;
+    let side = heights.nrows() / block;
+    let mut out = Vec::with_capacity(side * side);
+    for y in 0..side {
+        for x in 0..side {
+            let b = heights.slice(ndarray::s![
+                y * block..(y + 1) * block,
+                x * block..(x + 1) * block
+            ]);
+            out.push((b.mean().unwrap_or(0.0) - mean) as f32);
+        }
+    }
+    out
 }
 
 /// Mip levels of a `side` x `side` texture (down to 1 x 1).
@@ -191,8 +231,9 @@ fn push_mip_chain(
 }
 
 impl GpuMaterial {
-    /// Uploads the synthesized subspace images of `cache`, the range map (normals from the
-    /// cache, `heights` for displacement, mean-centred here) and the tables, for `pass`.
+    /// Uploads the synthesized subspace images of `cache`, its range map (normals, and
+    /// heights mean-centred here for displacement and cast shadows) and the tables, for
+    /// `pass`.
     ///
     /// # Errors
     /// A texture beyond the device's limits.
@@ -200,9 +241,9 @@ impl GpuMaterial {
         ctx: &GpuContext,
         pass: &MrfPass,
         cache: &SynthesisCache,
-        heights: Option<&Array2<f64>>,
         tables: &MaterialTables,
     ) -> Result<Self> {
+        let heights = cache.heights();
         let device = &ctx.device;
         let size = tables.size;
         let limits = device.limits();
@@ -274,6 +315,31 @@ impl GpuMaterial {
             None => push_mip_chain(&mut relief_data, tile, skip, |_, _| [0.0, 0.0, 1.0, 0.0]),
         }
         let relief = ctx.checked("relief texture", || texture("relief", 1, &relief_data))?;
+        let (shadow_side, shadow_data) = match (heights, tables.shadow_top) {
+            (Some(h), Some(_)) => (size, shadow_heights(h, skip)),
+            _ => (1, vec![0.0]),
+        };
+        let shadow = ctx.checked("shadow heights", || {
+            device.create_texture_with_data(
+                &ctx.queue,
+                &wgpu::TextureDescriptor {
+                    label: Some("shadow heights"),
+                    size: wgpu::Extent3d {
+                        width: shadow_side as u32,
+                        height: shadow_side as u32,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::R32Float,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                    view_formats: &[],
+                },
+                wgpu::util::TextureDataOrder::LayerMajor,
+                bytemuck::cast_slice(&shadow_data),
+            )
+        })?;
         let common = CommonBuffers::new(ctx, (&tables.view_lut, &tables.light_lut))?;
         let pair_layer =
             storage_buffer(ctx, "pair layers", bytemuck::cast_slice(&tables.pair_layer))?;
@@ -300,6 +366,7 @@ impl GpuMaterial {
             ..Default::default()
         });
         let relief_view = relief.create_view(&wgpu::TextureViewDescriptor::default());
+        let shadow_view = shadow.create_view(&wgpu::TextureViewDescriptor::default());
         let mut entries = common.entries();
         entries.extend([
             wgpu::BindGroupEntry {
@@ -327,6 +394,10 @@ impl GpuMaterial {
                 resource: light_strength.as_entire_binding(),
             },
             wgpu::BindGroupEntry {
+                binding: 12,
+                resource: wgpu::BindingResource::TextureView(&shadow_view),
+            },
+            wgpu::BindGroupEntry {
                 binding: 11,
                 resource: pair_gain.as_entire_binding(),
             },
@@ -344,6 +415,7 @@ impl GpuMaterial {
             size,
             tile,
             has_relief,
+            shadow_top: tables.shadow_top,
         })
     }
 
@@ -351,9 +423,13 @@ impl GpuMaterial {
     /// displacement's world units).
     pub fn set_frame(&self, ctx: &GpuContext, scene: &Scene, mesh: &GpuMesh) {
         let own = [
-            if self.has_relief { 1.0 } else { 0.0 },
+            if self.has_relief {
+                self.tile as f32
+            } else {
+                0.0
+            },
             mesh.world_per_uv / self.tile as f32,
-            0.0,
+            self.shadow_top.unwrap_or(-1.0),
         ];
         self.common.write(ctx, scene, own);
     }
@@ -398,6 +474,16 @@ impl MrfPass {
             storage_entry(9),
             storage_entry(10),
             storage_entry(11),
+            wgpu::BindGroupLayoutEntry {
+                binding: 12,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            },
         ]);
         let layout = bind_group_layout(ctx, "mrf material", &entries);
         let pipeline = |mapping: Mapping| {

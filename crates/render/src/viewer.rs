@@ -60,8 +60,7 @@ struct Viewer {
     config: wgpu::SurfaceConfiguration,
     ctx: GpuContext,
     pass: MrfPass,
-    bump_material: GpuMaterial,
-    displaced_material: GpuMaterial,
+    material: GpuMaterial,
     meshes: Vec<(GpuMesh, GpuMesh)>,
     mesh: usize,
     depth: wgpu::Texture,
@@ -144,9 +143,7 @@ impl App<'_> {
             },
         )?;
         let tables = MaterialTables::new(model, &cache, None)?;
-        let bump_material = GpuMaterial::new(&ctx, &pass, &cache, None, &tables)?;
-        let heights = model.range_heights(cache.options());
-        let displaced_material = GpuMaterial::new(&ctx, &pass, &cache, heights.as_ref(), &tables)?;
+        let material = GpuMaterial::new(&ctx, &pass, &cache, &tables)?;
         let mut meshes = Vec::new();
         for kind in &o.meshes {
             meshes.push((
@@ -161,8 +158,7 @@ impl App<'_> {
             config,
             ctx,
             pass,
-            bump_material,
-            displaced_material,
+            material,
             meshes,
             mesh: 0,
             depth,
@@ -194,9 +190,10 @@ impl App<'_> {
             width: v.config.width,
             height: v.config.height,
         };
-        let (material, mesh) = match self.mapping {
-            Mapping::Displacement => (&v.displaced_material, &v.meshes[v.mesh].1),
-            Mapping::Bump | Mapping::Plain => (&v.bump_material, &v.meshes[v.mesh].0),
+        let material = &v.material;
+        let mesh = match self.mapping {
+            Mapping::Displacement => &v.meshes[v.mesh].1,
+            Mapping::Bump | Mapping::Plain => &v.meshes[v.mesh].0,
         };
         material.set_frame(&v.ctx, &scene, mesh);
         let view = frame.texture.create_view(&Default::default());
