@@ -166,11 +166,11 @@ impl ShadowMarch<'_> {
         let (r0, c0) = (r.floor(), c.floor());
         let (fr, fc) = (r - r0, c - c0);
         let (r0, c0) = (r0 as isize, c0 as isize);
-        let v = |dr: isize, dc: isize| {
-            f.heights[[f.border.index(r0 + dr, h), f.border.index(c0 + dc, w)]]
-        };
-        (v(0, 0) * (1.0 - fc) + v(0, 1) * fc) * (1.0 - fr)
-            + (v(1, 0) * (1.0 - fc) + v(1, 1) * fc) * fr
+        let (ra, rb) = (f.border.index(r0, h), f.border.index(r0 + 1, h));
+        let (ca, cb) = (f.border.index(c0, w), f.border.index(c0 + 1, w));
+        let v = &f.heights;
+        (v[[ra, ca]] * (1.0 - fc) + v[[ra, cb]] * fc) * (1.0 - fr)
+            + (v[[rb, ca]] * (1.0 - fc) + v[[rb, cb]] * fc) * fr
     }
 }
 

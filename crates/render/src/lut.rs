@@ -157,12 +157,24 @@ impl MeanShading {
     }
 
     /// The same with the cast shadows of the tileable `heights` (texels, registered with
-    /// `normals`; [`ShadowField`]), over at most [`SHADOW_SAMPLES`] samples.
-    pub fn with_cast_shadows(normals: &Array3<f64>, heights: &Array2<f64>) -> Self {
-        Self::tabulate(normals, Some(ShadowField::new(heights, Edges::Wrap)))
+    /// `normals`; [`ShadowField`]), over at most [`SHADOW_SAMPLES`] samples, at the nodes up
+    /// to `lowest` (the zenith angle of the set's lowest light, degrees) and those a light
+    /// above it interpolates from. Beyond, where the shader leaves every fragment black, the
+    /// nodes keep the mean without cast shadows: near the horizon every ray marches its
+    /// longest, and those nodes took 70 % of the time (about 5 s for the built-in stones).
+    pub fn with_cast_shadows(normals: &Array3<f64>, heights: &Array2<f64>, lowest: f64) -> Self {
+        // The four nodes around a direction lie within sqrt(2) node spacings of it.
+        let spacing = 180.0 / (SHADING_GRID - 1) as f64;
+        let reach = (lowest + 2.0 * spacing).to_radians().cos();
+        Self::tabulate(
+            normals,
+            Some((ShadowField::new(heights, Edges::Wrap), reach)),
+        )
     }
 
-    fn tabulate(normals: &Array3<f64>, shadows: Option<ShadowField>) -> Self {
+    /// The table; with `shadows` (the field and the smallest light z it marches for), cast
+    /// shadows included.
+    fn tabulate(normals: &Array3<f64>, shadows: Option<(ShadowField, f64)>) -> Self {
         let (_, h, w) = normals.dim();
         let most = if shadows.is_some() {
             SHADOW_SAMPLES
@@ -183,7 +195,9 @@ impl MeanShading {
             .into_par_iter()
             .map(|i| {
                 let l = node_vector(i % n, i / n);
-                let march = shadows.and_then(|f| f.towards(l));
+                let march = shadows
+                    .filter(|&(_, reach)| l[2] >= reach)
+                    .and_then(|(f, _)| f.towards(l));
                 let sum: f64 = samples
                     .iter()
                     .map(|&(y, x, s)| {

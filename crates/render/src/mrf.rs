@@ -90,6 +90,13 @@ impl MaterialTables {
             layer_of[k] = layer as u32;
         }
         let (nv, nl) = (model.views().len(), model.lights().len());
+        // The zenith angle of the set's lowest light, degrees.
+        let lowest = model
+            .lights()
+            .as_slice()
+            .iter()
+            .map(|d| d.theta_deg)
+            .fold(0.0, f64::max);
         // The heights whose shadows the shader casts.
         let cast = cache.heights().filter(|_| {
             model
@@ -115,7 +122,7 @@ impl MaterialTables {
             view_lut,
             light_lut,
             mean_shading: cache.normals().map(|n| match cast {
-                Some(h) => MeanShading::with_cast_shadows(n, h),
+                Some(h) => MeanShading::with_cast_shadows(n, h, lowest),
                 None => MeanShading::new(n),
             }),
             shadow_top: cast.map(|h| {
