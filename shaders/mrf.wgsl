@@ -93,7 +93,7 @@ fn cast_light(uv: vec2<f32>, l: vec3<f32>) -> f32 {
 // The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
 // light) pairs blend their clusters' subspace images (each at its pair's gain), then the range map's normal relights
 // the blend for the light by the factor 1 + k (s - 1) (floored at SHADING_FLOOR, which
-// mrf.rs defines from the CPU's), s = max(0, n . l) / mean shading, so
+// mrf.rs defines from the CPU's), s = max(0, n . l) (times cast_light) / mean shading, so
 // that the subspace images' own average shading is not applied twice, k the measured
 // strength (bump_relight, bump_strength). Clusters that were not synthesized
 // (outside the planned set) are skipped and the weights renormalised.

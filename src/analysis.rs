@@ -1124,25 +1124,28 @@ fn estimate_range_map(
         shadows: Shadows::Attached,
     };
     let registered = map.registered(h, w);
-    let fits = |shadows: Shadows| {
-        btf.lights()
-            .as_slice()
-            .par_iter()
-            .enumerate()
-            .map(|(l, d)| {
-                let lum = relight::luminance(&btf.image(view, l)?);
-                Ok(relight::fit_strength(
-                    &lum,
-                    &registered,
-                    d.vector(),
-                    shadows,
-                ))
-            })
-            .collect::<std::result::Result<Vec<_>, crate::btf::BtfError>>()
+    // Each frontal image is read once and fitted with every kind of shadows in question.
+    let kinds = match shadows {
+        Some(s) => vec![s],
+        None => vec![Shadows::Attached, Shadows::Cast],
     };
+    let per_light = btf
+        .lights()
+        .as_slice()
+        .par_iter()
+        .enumerate()
+        .map(|(l, d)| {
+            let lum = relight::luminance(&btf.image(view, l)?);
+            Ok(kinds
+                .iter()
+                .map(|&k| relight::fit_strength(&lum, &registered, d.vector(), k))
+                .collect::<Vec<_>>())
+        })
+        .collect::<std::result::Result<Vec<_>, crate::btf::BtfError>>()?;
+    let column = |i: usize| per_light.iter().map(|f| f[i]).collect::<Vec<_>>();
     let (shadows, fits) = match shadows {
-        Some(s) => (s, fits(s)?),
-        None => choose_shadows(fits(Shadows::Attached)?, fits(Shadows::Cast)?),
+        Some(s) => (s, column(0)),
+        None => choose_shadows(column(0), column(1)),
     };
     map.shadows = shadows;
     map.strength = fits.iter().map(|f| f.strength as f32).collect();

@@ -6,7 +6,8 @@
 //! [`DirectionSet::interpolate`](btfmrf::btf::DirectionSet::interpolate) does on the CPU), and
 //! the 9 (view, light) pairs pick their clusters' synthesized subspace images from a tileable
 //! texture array. The blend is relit by the range map's normals like
-//! [`bump_relight`](btfmrf::synthesis::bump_relight): `max(0, n . l) / mean(max(0, n . l))`.
+//! [`bump_relight`](btfmrf::synthesis::bump_relight): `max(0, n . l) / mean(max(0, n . l))`,
+//! times the cast light of a shadow ray marched over the heights where the map casts shadows.
 //! Displacement mapping also moves the vertices of a finely tessellated mesh along the normal
 //! by the range map.
 //!

@@ -11,8 +11,8 @@
 //! than a cell), not quantised to the grid.
 //!
 //! **Mean shading.** [`bump_relight`](btfmrf::synthesis::bump_relight) divides by the mean of
-//! `max(0, n . l)` over the texture; [`MeanShading`] tabulates it on a grid of light
-//! directions (bilinear in between).
+//! `max(0, n . l)` (times the cast light, where the range map casts shadows) over the
+//! texture; [`MeanShading`] tabulates it on a grid of light directions (bilinear in between).
 
 use ndarray::{Array2, Array3};
 use rayon::prelude::*;
