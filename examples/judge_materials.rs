@@ -9,8 +9,8 @@
 //!
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
 //! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--verbose]
-//! [--sheet DIR] [--seed N] [--pair-rank K] [--shadows attached|cast]`; `--shadows` forces the
-//! range map's shadows (default: analysis chooses); `--seed` sets the synthesis seed (default 1;
+//! [--sheet DIR] [--seed N] [--pair-rank K] [--shadows attached|cast|auto]`; `--shadows` sets
+//! the range map's shadows (default: attached; auto: analysis chooses); `--seed` sets the synthesis seed (default 1;
 //! one seed's figures move by about 0.1-0.3 crop levels from seed to seed); `--pair-rank K` is
 //! an experiment: every judged image gets the L* table of its own light rebuilt from the mean
 //! and K principal components (8-bit coefficients) of the tables of all frontal lights, as
@@ -168,10 +168,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--no-colour-tables" => options.colour_matching = false,
             "--no-lit-tables" => options.lit_matching = false,
             "--shadows" => {
-                options.shadows = match args.next().ok_or("--shadows attached|cast")?.as_str() {
+                options.shadows = match args.next().ok_or("--shadows attached|cast|auto")?.as_str()
+                {
                     "attached" => Some(Shadows::Attached),
                     "cast" => Some(Shadows::Cast),
-                    other => return Err(format!("--shadows {other}: attached or cast").into()),
+                    "auto" => None,
+                    other => {
+                        return Err(format!("--shadows {other}: attached, cast or auto").into());
+                    }
                 }
             }
             "--verbose" => verbose = true,

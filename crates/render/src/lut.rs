@@ -340,4 +340,34 @@ mod tests {
             );
         }
     }
+    #[test]
+    fn the_shadowed_table_holds_the_cast_light_at_its_nodes() {
+        use btfmrf::geometry::integrate::{normals_of_periodic, shading};
+        use btfmrf::geometry::relight::cast_light;
+        // Ridges tall enough to shadow each other at low lights.
+        let heights = ndarray::Array2::from_shape_fn((32, 32), |(y, x)| {
+            4.0 * (x as f64 * std::f64::consts::PI / 8.0).sin().max(0.0) + 0.5 * (y as f64 * 0.4).cos()
+        });
+        let normals = normals_of_periodic(&heights);
+        let plain = MeanShading::new(&normals);
+        let table = MeanShading::with_cast_shadows(&normals, &heights, 75.0);
+        let n = SHADING_GRID;
+        let mut darker = 0;
+        for (x, y) in [(32, 32), (10, 31), (50, 40), (20, 12), (31, 55)] {
+            let l = node_vector(x, y);
+            let i = y * n + x;
+            let exact = (shading(&heights, Edges::Wrap, l) * cast_light(&heights, Edges::Wrap, l))
+                .mean()
+                .unwrap();
+            let got = f64::from(table.values[i]);
+            assert!((got - exact).abs() < 1e-5, "node ({x}, {y}): {got} vs {exact}");
+            if got < f64::from(plain.values[i]) - 1e-3 {
+                darker += 1;
+            }
+        }
+        assert!(darker >= 3, "the low lights' shadows darken the mean");
+        // Beyond the lowest light's reach the nodes keep the unshadowed mean.
+        assert_eq!(table.values[0], plain.values[0]);
+    }
 }
+
