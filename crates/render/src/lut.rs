@@ -346,7 +346,8 @@ mod tests {
         use btfmrf::geometry::relight::cast_light;
         // Ridges tall enough to shadow each other at low lights.
         let heights = ndarray::Array2::from_shape_fn((32, 32), |(y, x)| {
-            4.0 * (x as f64 * std::f64::consts::PI / 8.0).sin().max(0.0) + 0.5 * (y as f64 * 0.4).cos()
+            4.0 * (x as f64 * std::f64::consts::PI / 8.0).sin().max(0.0)
+                + 0.5 * (y as f64 * 0.4).cos()
         });
         let normals = normals_of_periodic(&heights);
         let plain = MeanShading::new(&normals);
@@ -360,7 +361,10 @@ mod tests {
                 .mean()
                 .unwrap();
             let got = f64::from(table.values[i]);
-            assert!((got - exact).abs() < 1e-5, "node ({x}, {y}): {got} vs {exact}");
+            assert!(
+                (got - exact).abs() < 1e-5,
+                "node ({x}, {y}): {got} vs {exact}"
+            );
             if got < f64::from(plain.values[i]) - 1e-3 {
                 darker += 1;
             }
@@ -370,4 +374,3 @@ mod tests {
         assert_eq!(table.values[0], plain.values[0]);
     }
 }
-
