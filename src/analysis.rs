@@ -81,9 +81,8 @@ pub struct AnalysisOptions {
     /// attached only. Cast shadows brought the built-in stones closer to their frontal
     /// photographs (the judge at nine frontal lights: x2.10 -> x1.80 the another-crop level)
     /// but the synthesis of every view further (`btfmrf bench`'s eight pairs over all views:
-    /// stones 64^2 x1.51 -> x1.61, sponge 128^2 x2.15 -> x2.23 and 2.36 -> 2.92 Lab), where
-    /// the oblique views' subspace images keep their measured shadows and get the relief's
-    /// again.
+    /// stones 64^2 x1.51 -> x1.61, sponge 128^2 x2.15 -> x2.23 and 2.36 -> 2.92 Lab; the
+    /// cause is open, see docs/BENCHMARKS.md).
     pub shadows: Option<Shadows>,
 }
 
