@@ -63,21 +63,34 @@ pub fn shading_factor(
     l: [f64; 3],
     shading: Shading,
 ) -> Option<Array2<f64>> {
-    let shade = lit_shading(heights, border, l, shading.shadows);
+    let cast = (shading.shadows == Shadows::Cast).then(|| cast_light(heights, border, l));
+    factor_of(
+        lit_shading(heights, border, l, cast.as_ref()),
+        shading.strength,
+    )
+}
+
+/// The factor `1 + strength (s / mean(s) - 1)` of the lit shading `shade` (`s`); `None` when
+/// (almost) nothing is lit.
+fn factor_of(shade: Array2<f64>, strength: f64) -> Option<Array2<f64>> {
     let mean = shade.mean()?;
     if mean < DARK {
         return None;
     }
-    let strength = shading.strength;
     let a = strength / mean;
     Some(shade.mapv(|s| 1.0 - strength + a * s))
 }
 
-/// `max(0, n . l)`, times the cast light when `shadows` says so.
-fn lit_shading(heights: &Array2<f64>, border: Edges, l: [f64; 3], shadows: Shadows) -> Array2<f64> {
+/// `max(0, n . l)`, times the cast light `cast` where the relief casts shadows.
+fn lit_shading(
+    heights: &Array2<f64>,
+    border: Edges,
+    l: [f64; 3],
+    cast: Option<&Array2<f64>>,
+) -> Array2<f64> {
     let mut shade = shading(heights, border, l);
-    if shadows == Shadows::Cast {
-        shade *= &cast_light(heights, border, l);
+    if let Some(cast) = cast {
+        shade *= cast;
     }
     shade
 }
@@ -278,10 +291,13 @@ pub fn remove_shading(
     l: [f64; 3],
     shading: Shading,
 ) {
-    if let Some(factor) = shading_factor(heights, Edges::Clamp, l, shading) {
+    // The cast light is marched once, for the factor and for the fill.
+    let cast = (shading.shadows == Shadows::Cast).then(|| cast_light(heights, Edges::Clamp, l));
+    let shade = lit_shading(heights, Edges::Clamp, l, cast.as_ref());
+    if let Some(factor) = factor_of(shade, shading.strength) {
         divide_shading(image, &factor);
-        if shading.shadows == Shadows::Cast && shading.strength > 0.0 {
-            fill_shadowed(image, &cast_light(heights, Edges::Clamp, l));
+        if let Some(cast) = cast.filter(|_| shading.strength > 0.0) {
+            fill_shadowed(image, &cast);
         }
     }
 }

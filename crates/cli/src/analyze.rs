@@ -157,7 +157,7 @@ pub struct Args {
     /// 0.53; the five RTI captures stay attached). Cast shadows bring the frontal view closer
     /// (the built-in stones under nine frontal lights: 14 % closer to the measured images by
     /// the texture judge) but the oblique views further (bench over all views: stones 6 %,
-    /// sponge 4 % further, and 0.2-0.55 Lab more colour error; why is not yet known). Cost: a 1024x1024 stones image takes about
+    /// sponge 4 % further, and 0.2-0.56 Lab more colour error; why is not yet known). Cost: a 1024x1024 stones image takes about
     /// a quarter more CPU time, and `render` about 2 s more to tabulate the shadowed mean
     /// shading over light directions.
     #[arg(long, value_enum, default_value_t = ShadowChoice::Attached)]

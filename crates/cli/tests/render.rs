@@ -13,7 +13,7 @@ use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction, io};
 use btfmrf::geometry::relight::Shadows;
 use btfmrf::lpca::{self, LpcaModel, LpcaOptions, Method};
-use btfmrf::model::{MaterialModel, format};
+use btfmrf::model::{MaterialModel, RangeMap, format};
 use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
 use btfmrf_render::headless::ModelRenderOptions;
@@ -29,6 +29,18 @@ fn golden_model_path() -> PathBuf {
 
 fn golden_model() -> MaterialModel {
     format::read(&golden_model_path()).expect("tests/golden/sponge64.btfm reads")
+}
+
+/// The golden model with its range map changed by `edit`.
+fn golden_with_range_map(edit: impl FnOnce(&mut RangeMap)) -> MaterialModel {
+    let mut parts = golden_model().into_parts();
+    edit(
+        parts
+            .range_map
+            .as_mut()
+            .expect("the golden model has a range map"),
+    );
+    MaterialModel::new(parts).unwrap()
 }
 
 /// The renderer, or `None` (with a message; a failure when `CI` is set) when this machine has
@@ -179,16 +191,12 @@ fn gpu_equals_the_cpu_reference_on_a_flat_plane() {
 #[test]
 fn the_gpu_applies_the_measured_bump_strength_per_light() {
     let Some(renderer) = renderer() else { return };
-    let mut parts = golden_model().into_parts();
-    let lights = parts.lights.len();
-    let map = parts
-        .range_map
-        .as_mut()
-        .expect("the golden model has a range map");
+    let lights = golden_model().lights().len();
     // Weak relief under some lights, none under others, full under the rest (as fitted on
     // real captures, where the Lambertian ratio overstates low lights).
-    map.strength = (0..lights).map(|l| [0.15, 0.0, 0.6, 1.0][l % 4]).collect();
-    let model = MaterialModel::new(parts).unwrap();
+    let model = golden_with_range_map(|map| {
+        map.strength = (0..lights).map(|l| [0.15, 0.0, 0.6, 1.0][l % 4]).collect();
+    });
     let lights = [
         Direction::new(45.0, 60.0),
         Direction::new(37.0, 100.0),
@@ -200,13 +208,7 @@ fn the_gpu_applies_the_measured_bump_strength_per_light() {
 #[test]
 fn the_gpu_casts_the_relief_shadows_as_the_cpu_does() {
     let Some(renderer) = renderer() else { return };
-    let mut parts = golden_model().into_parts();
-    parts
-        .range_map
-        .as_mut()
-        .expect("the golden model has a range map")
-        .shadows = Shadows::Cast;
-    let model = MaterialModel::new(parts).unwrap();
+    let model = golden_with_range_map(|map| map.shadows = Shadows::Cast);
     // Low lights cast long shadows over the sponge's pores.
     let lights = [
         Direction::new(60.0, 60.0),

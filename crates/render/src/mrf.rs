@@ -276,25 +276,36 @@ impl GpuMaterial {
         if planes.is_empty() {
             planes.push(&zero);
         }
-        let extent = |layers: usize| wgpu::Extent3d {
-            width: size as u32,
-            height: size as u32,
-            depth_or_array_layers: layers as u32,
-        };
-        let texture = |label, layers: usize, data: &[u8]| {
+        // A square texture of `side` texels and `layers` layers, with `mips` levels in `data`.
+        let upload = |label, side: usize, layers: usize, format, mips, data: &[u8]| {
             device.create_texture_with_data(
                 &ctx.queue,
                 &wgpu::TextureDescriptor {
                     label: Some(label),
-                    size: extent(layers),
-                    mip_level_count: mip_levels(size),
+                    size: wgpu::Extent3d {
+                        width: side as u32,
+                        height: side as u32,
+                        depth_or_array_layers: layers as u32,
+                    },
+                    mip_level_count: mips,
                     sample_count: 1,
                     dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::Rgba16Float,
+                    format,
                     usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
                     view_formats: &[],
                 },
                 wgpu::util::TextureDataOrder::LayerMajor,
+                data,
+            )
+        };
+        // The half-float RGBA textures, with their whole mip chain.
+        let texture = |label, layers: usize, data: &[u8]| {
+            upload(
+                label,
+                size,
+                layers,
+                wgpu::TextureFormat::Rgba16Float,
+                mip_levels(size),
                 data,
             )
         };
@@ -327,24 +338,14 @@ impl GpuMaterial {
             _ => (1, vec![0.0]),
         };
         let shadow = ctx.checked("shadow heights", || {
-            device.create_texture_with_data(
-                &ctx.queue,
-                &wgpu::TextureDescriptor {
-                    label: Some("shadow heights"),
-                    size: wgpu::Extent3d {
-                        width: shadow_side as u32,
-                        height: shadow_side as u32,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::R32Float,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                    view_formats: &[],
-                },
-                wgpu::util::TextureDataOrder::LayerMajor,
-                bytemuck::cast_slice(&shadow_data),
+            let bytes = bytemuck::cast_slice(&shadow_data);
+            upload(
+                "shadow heights",
+                shadow_side,
+                1,
+                wgpu::TextureFormat::R32Float,
+                1,
+                bytes,
             )
         })?;
         let common = CommonBuffers::new(ctx, (&tables.view_lut, &tables.light_lut))?;
