@@ -238,3 +238,18 @@ fn tangent_directions(in: VertexOutput) -> TangentDirections {
     }
     return TangentDirections(to_world * v_world, to_world * normalize(l_world), falloff);
 }
+
+// True for colour targets that clip to [0, 1] (an 8-bit window surface): the fragment's colour
+// is then brought into range keeping its chromaticity, as the CPU's 8-bit encoding does
+// (`color::fit_to_gamut`); float targets keep over-range values. Clipping each channel on its
+// own turned over-range highlights into false-colour specks.
+override FIT_TO_DISPLAY: bool = false;
+
+fn displayed(colour: vec4<f32>) -> vec4<f32> {
+    if (!FIT_TO_DISPLAY) {
+        return colour;
+    }
+    let rgb = max(colour.rgb, vec3<f32>(0.0));
+    let peak = max(max(rgb.r, rgb.g), rgb.b);
+    return vec4<f32>(rgb / max(peak, 1.0), colour.a);
+}

@@ -14,5 +14,5 @@ fn vs_main(in: VertexInput) -> VertexOutput {
 
 @fragment
 fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
-    return shade_mrf_blended(in);
+    return displayed(shade_mrf_blended(in));
 }

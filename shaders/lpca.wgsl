@@ -89,5 +89,5 @@ fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
     if (w.z > 0.0) {
         colour += w.z * shade_lpca(turned(in, in.seam.z, in.seam_uv.zw));
     }
-    return colour;
+    return displayed(colour);
 }

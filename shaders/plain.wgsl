@@ -8,5 +8,5 @@ fn vs_main(in: VertexInput) -> VertexOutput {
 
 @fragment
 fn fs_main(in: VertexOutput) -> @location(0) vec4<f32> {
-    return vec4<f32>(textureSample(subspaces, tex_sampler, in.uv, 0u).rgb, 1.0);
+    return displayed(vec4<f32>(textureSample(subspaces, tex_sampler, in.uv, 0u).rgb, 1.0));
 }

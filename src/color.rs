@@ -134,6 +134,22 @@ pub fn lab_to_xyz([l, a, b]: [f32; 3]) -> [f32; 3] {
     ]
 }
 
+/// A linear RGB pixel brought into the display's range [0, 1] keeping its chromaticity:
+/// negative channels are raised to 0, and a pixel with a channel above 1 is scaled down as a
+/// whole until its largest channel is 1. Clipping each channel on its own instead turns an
+/// over-range highlight's hue (a bright yellow pixel loses its yellow): on the built-in sponge
+/// the relit highlights clipped that way were false-colour specks, a* kurtosis 40 against the
+/// measured 3.1.
+pub fn fit_to_gamut(rgb: [f32; 3]) -> [f32; 3] {
+    let rgb = rgb.map(|v| v.max(0.0));
+    let peak = rgb[0].max(rgb[1]).max(rgb[2]);
+    if peak > 1.0 {
+        rgb.map(|v| v / peak)
+    } else {
+        rgb
+    }
+}
+
 /// Linear RGB to CIE Lab (D65), the colour space of the paper's error figures.
 pub fn linear_to_lab(rgb: [f32; 3]) -> [f32; 3] {
     xyz_to_lab(linear_to_xyz(rgb))
@@ -176,6 +192,23 @@ pub fn delta_e76(a: [f32; 3], b: [f32; 3]) -> f32 {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn fitting_to_the_gamut_keeps_in_range_pixels_and_the_chromaticity_of_highlights() {
+        assert_eq!(super::fit_to_gamut([0.2, 0.5, 1.0]), [0.2, 0.5, 1.0]);
+        assert_eq!(super::fit_to_gamut([-0.1, 0.5, 0.3]), [0.0, 0.5, 0.3]);
+        let bright = [1.6, 1.2, 0.4];
+        let fitted = super::fit_to_gamut(bright);
+        assert_eq!(fitted[0], 1.0);
+        // Chromaticity kept: the same hue in Lab, where clipping each channel turns it.
+        let hue = |rgb: [f32; 3]| {
+            let lab = super::linear_to_lab(rgb);
+            lab[2].atan2(lab[1])
+        };
+        let scaled = bright.map(|v| v / 2.0);
+        assert!((hue(fitted) - hue(scaled)).abs() < 1e-3);
+        assert!((hue(bright.map(|v| v.min(1.0))) - hue(scaled)).abs() > 0.05);
+    }
+
     use super::*;
     use approx::assert_abs_diff_eq;
 

@@ -23,7 +23,8 @@
 //! blurred, and optionally a crop of a different material. A candidate's `structure_vs_crop`
 //! and `structure_vs_random_phase` are its structure distance over those two levels.
 //!
-//! Images are taken as planar `(3, h, w)` linear RGB, clamped to [0, 1] as a display would.
+//! Images are taken as planar `(3, h, w)` linear RGB, brought into [0, 1] as our display does
+//! ([`crate::color::fit_to_gamut`]).
 //! Band statistics are computed on a mirrored copy (so the borders make no seam) over the
 //! image's own pixels.
 
@@ -35,7 +36,7 @@ use rustfft::num_complex::Complex64;
 
 use super::pyramid::OrientedPyramid;
 use super::{EvalError, Result};
-use crate::color::linear_to_lab;
+use crate::color::{fit_to_gamut, linear_to_lab};
 
 /// Orientations of the pyramid.
 const ORIENTATIONS: usize = 4;
@@ -351,8 +352,7 @@ fn to_lab(image: &Array3<f32>) -> Array3<f32> {
     let mut lab = Array3::zeros((3, h, w));
     for y in 0..h {
         for x in 0..w {
-            let rgb = [0, 1, 2].map(|k| image[[k, y, x]].clamp(0.0, 1.0));
-            let v = linear_to_lab(rgb);
+            let v = linear_to_lab(fit_to_gamut([0, 1, 2].map(|k| image[[k, y, x]])));
             for k in 0..3 {
                 lab[[k, y, x]] = v[k];
             }

@@ -15,7 +15,7 @@
 
 use ndarray::{Array2, Array3, s};
 
-use crate::color::linear_to_lab;
+use crate::color::{fit_to_gamut, linear_to_lab};
 
 /// Welch tile size, pixels.
 const TILE: usize = 32;
@@ -44,13 +44,12 @@ pub struct TextureStats {
 const RANGES: [(f64, f64); 3] = [(0.0, 100.0), (-128.0, 128.0), (-128.0, 128.0)];
 
 impl TextureStats {
-    /// Statistics of a planar `(3, h, w)` linear RGB image (values clamped to [0, 1] as a
-    /// display would). Images smaller than 32 x 32 are compared by colour only.
+    /// Statistics of a planar `(3, h, w)` linear RGB image (brought into [0, 1] as our
+    /// display does, [`crate::color::fit_to_gamut`]). Images smaller than 32 x 32 are compared by colour only.
     pub fn of(image: &Array3<f32>) -> Self {
         let (_, h, w) = image.dim();
         let lab = Array3::from_shape_fn((3, h, w), |(c, y, x)| {
-            let rgb = [0, 1, 2].map(|k| image[[k, y, x]].clamp(0.0, 1.0));
-            f64::from(linear_to_lab(rgb)[c])
+            f64::from(linear_to_lab(fit_to_gamut([0, 1, 2].map(|k| image[[k, y, x]])))[c])
         });
         let cdfs = std::array::from_fn(|c| {
             let (lo, hi) = RANGES[c];

@@ -247,8 +247,20 @@ pub(crate) fn bind_group_layout(
         })
 }
 
+/// Whether a colour target of `format` clips to [0, 1] (all but the float formats): its
+/// fragments are fitted to the gamut first (`displayed` in common.wgsl).
+fn clips(format: wgpu::TextureFormat) -> bool {
+    !matches!(
+        format,
+        wgpu::TextureFormat::Rgba16Float
+            | wgpu::TextureFormat::Rgba32Float
+            | wgpu::TextureFormat::Rg11b10Ufloat
+    )
+}
+
 /// Compiles `source` (entry points `vs_main`, `fs_main`; vertices as [`Vertex`]) into a
-/// triangle pipeline with depth test for colour targets of `format`, bound by `layout`.
+/// triangle pipeline with depth test for colour targets of `format`, bound by `layout`;
+/// targets that clip get their colour fitted to the gamut ([`clips`]).
 ///
 /// # Errors
 /// A shader or pipeline the device rejects.
@@ -296,7 +308,10 @@ pub(crate) fn render_pipeline(
             fragment: Some(wgpu::FragmentState {
                 module: &module,
                 entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[("FIT_TO_DISPLAY", f64::from(u8::from(clips(format))))],
+                    ..Default::default()
+                },
                 targets: &[Some(wgpu::ColorTargetState {
                     format,
                     blend: None,

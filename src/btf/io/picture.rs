@@ -10,7 +10,7 @@ use ndarray::Array3;
 
 use crate::btf::dataset::check_finite;
 use crate::btf::error::{BtfError, Result};
-use crate::color::{Srgb8Encoder, srgb_to_linear, srgb8_to_linear_table};
+use crate::color::{Srgb8Encoder, fit_to_gamut, srgb_to_linear, srgb8_to_linear_table};
 
 /// The largest accepted image side, in pixels (a header claiming more is rejected unread).
 pub const MAX_SIDE: u32 = 16_384;
@@ -303,8 +303,9 @@ fn decode_exr(bytes: &[u8], file: &str) -> Result<Array3<f32>> {
     Ok(out)
 }
 
-/// Encodes planar `(3, h, w)` linear RGB into file bytes of the given format (8-bit formats are
-/// sRGB-encoded and clipped to [0, 1]).
+/// Encodes planar `(3, h, w)` linear RGB into file bytes of the given format: EXR keeps the
+/// values; 8-bit formats are sRGB-encoded after [`fit_to_gamut`] (over-range pixels scaled
+/// down whole, keeping their colour).
 ///
 /// # Errors
 /// A wrong shape, or the encoder fails.
@@ -337,8 +338,12 @@ pub fn encode(image: &Array3<f32>, format: ImageFormat, file: &str) -> Result<Ve
         ImageFormat::Jpeg { .. } | ImageFormat::Png => {
             let enc = Srgb8Encoder::new();
             let mut rgb = vec![0u8; w * h * 3];
-            for ((ch, y, x), v) in image.indexed_iter() {
-                rgb[(y * w + x) * 3 + ch] = enc.encode(*v);
+            for (i, pixel) in rgb.chunks_exact_mut(3).enumerate() {
+                let (y, x) = (i / w, i % w);
+                let fitted = fit_to_gamut([0, 1, 2].map(|c| image[[c, y, x]]));
+                for (code, v) in pixel.iter_mut().zip(fitted) {
+                    *code = enc.encode(v);
+                }
             }
             encode_rgb8(&rgb, w as u32, h as u32, format, file)
         }
