@@ -25,6 +25,8 @@ struct Globals {
     // lowest direction if below the horizon, as the CPU's DirectionSet::interpolate), z: the
     // tangent-frame z at and below which the light is beyond the set's lowest light.
     limits: vec4<f32>,
+    // The material's relief heights (see mrf.wgsl).
+    relief: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> globals: Globals;

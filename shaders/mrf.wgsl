@@ -3,9 +3,10 @@
 // bump_relight); the buffers are built in crates/render/src/mrf.rs.
 //
 // Globals.params here: y = the tile's side in texels when the model has a range map (0
-// without), z = displacement scale (world units per height texel), w = the highest relief
-// height (tile texels above the mean) when the range map casts shadows, negative when it does
-// not.
+// without), z = displacement scale (world units per height texel). Globals.relief: x, y = the
+// highest and lowest relief heights (tile texels from the mean), z = 1 when the range map
+// casts shadows (0 when it does not). VIEW_PARALLAX (set before this file): the relief's view
+// parallax is marched (bump mapping).
 // Lights at or beyond the set's lowest light (globals.limits.z) leave a fragment black.
 
 const SHADING_GRID: u32 = 64u;
@@ -13,6 +14,11 @@ const SHADING_GRID: u32 = 64u;
 const MAX_SHADOW_STEPS: u32 = 256u;
 // Height a sample must rise above a shadow ray to block it (the CPU's SHADOW_TOLERANCE).
 const SHADOW_TOLERANCE: f32 = 0.05;
+// A view ray's march (geometry::parallax on the CPU): step, bisection steps, longest stretch,
+// in height-texture texels.
+const VIEW_STEP: f32 = 0.5;
+const REFINE_STEPS: u32 = 6u;
+const MAX_VIEW_SPAN: f32 = 256.0;
 const NO_LAYER: u32 = 0xffffffffu;
 
 // The synthesized subspace images (tileable), one layer per synthesized cluster.
@@ -29,7 +35,7 @@ const NO_LAYER: u32 = 0xffffffffu;
 // Per (view * lights + light), the measured pair's gain (MaterialModel::pair_gain).
 @group(0) @binding(11) var<storage, read> pair_gain: array<f32>;
 // The range map's heights (tile texels above their mean) in single precision, read unfiltered
-// for the cast shadows (1 x 1 when the map casts none).
+// for the view parallax and the cast shadows (1 x 1 without a range map).
 @group(0) @binding(12) var shadow_heights: texture_2d<f32>;
 
 // Mean of max(0, n . l) over the texture for the projected tangent-frame light direction q
@@ -66,9 +72,9 @@ fn shadow_height(p: vec2<f32>) -> f32 {
 // shadow on it (ShadowMarch on the CPU): one-texel steps towards the light over the heights,
 // until the ray rises above the highest one.
 fn cast_light(uv: vec2<f32>, l: vec3<f32>) -> f32 {
-    let top = globals.params.w;
+    let top = globals.relief.x;
     let horizontal = length(l.xy);
-    if (top < 0.0 || horizontal < 1e-6) {
+    if (globals.relief.z < 0.5 || horizontal < 1e-6) {
         return 1.0;
     }
     let size = f32(textureDimensions(shadow_heights).x);
@@ -90,6 +96,49 @@ fn cast_light(uv: vec2<f32>, l: vec3<f32>) -> f32 {
     return 1.0;
 }
 
+// Where the tangent-frame view v sees the relief at uv (view_warp on the CPU): the view ray
+// through uv at the mean height is marched down from the highest height in VIEW_STEP texel
+// steps until the heights reach it, the hit refined by bisection; uv itself for a frontal
+// view, without a range map, or where the mapping shows parallax by its geometry.
+fn seen_uv(uv: vec2<f32>, v: vec3<f32>) -> vec2<f32> {
+    let horizontal = length(v.xy);
+    if (!VIEW_PARALLAX || globals.params.y < 0.5 || v.z <= 0.0 || horizontal < 1e-6) {
+        return uv;
+    }
+    let size = f32(textureDimensions(shadow_heights).x);
+    // Towards the camera: uv's v runs down the rows, the view's y up; heights in tile texels.
+    let dir = vec2<f32>(v.x, -v.y) / horizontal;
+    let rise = v.z / horizontal * globals.params.y / size;
+    let p = uv * size - vec2<f32>(0.5);
+    let first = min(globals.relief.x / rise, MAX_VIEW_SPAN);
+    let last = max(globals.relief.y / rise, -MAX_VIEW_SPAN);
+    var above = first;
+    var s = first;
+    var hit = last;
+    loop {
+        if (shadow_height(p + s * dir) >= s * rise) {
+            hit = s;
+            break;
+        }
+        if (s <= last) {
+            break;
+        }
+        above = s;
+        s = max(s - VIEW_STEP, last);
+    }
+    var lo = hit;
+    var hi = above;
+    for (var i = 0u; i < REFINE_STEPS; i++) {
+        let mid = 0.5 * (lo + hi);
+        if (shadow_height(p + mid * dir) >= mid * rise) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return (p + lo * dir + vec2<f32>(0.5)) / size;
+}
+
 // The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
 // light) pairs blend their clusters' subspace images (each at its pair's gain), then the range map's normal relights
 // the blend for the light by the factor 1 + k (s - 1) (floored at SHADING_FLOOR, which
@@ -103,7 +152,8 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
     let v = dirs.v;
     let l = dirs.l;
     let falloff = dirs.falloff;
-    let relief_here = textureSampleGrad(relief, tex_sampler, in.uv, ddx, ddy);
+    let uv = seen_uv(in.uv, v);
+    let relief_here = textureSampleGrad(relief, tex_sampler, uv, ddx, ddy);
     if (l.z <= globals.limits.z) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
@@ -119,7 +169,7 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
                 let pair = iv.index[a] * globals.counts.y + il.index[b];
                 let layer = pair_layer[pair];
                 if (layer != NO_LAYER) {
-                    let texel = textureSampleGrad(subspaces, tex_sampler, in.uv, layer, ddx, ddy).rgb;
+                    let texel = textureSampleGrad(subspaces, tex_sampler, uv, layer, ddx, ddy).rgb;
                     sum += w * pair_gain[pair] * texel;
                     total += w;
                 }
@@ -135,7 +185,7 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
             for (var b = 0; b < 3; b++) {
                 k += il.weight[b] * light_strength[il.index[b]];
             }
-            let s = max(dot(relief_here.xyz, l), 0.0) * cast_light(in.uv, l) / mean;
+            let s = max(dot(relief_here.xyz, l), 0.0) * cast_light(uv, l) / mean;
             colour *= max(1.0 + k * (s - 1.0), SHADING_FLOOR);
         }
     }

@@ -18,6 +18,7 @@ use crate::decompose::marginals::{self, MarginalMap};
 use crate::decompose::{Border, ColourSpace, Pyramid};
 use crate::geometry::integrate::{Edges, normals_of, normals_of_periodic};
 use crate::geometry::lattice::{self, Lattice};
+use crate::geometry::parallax;
 use crate::geometry::relight::{SHADING_FLOOR, Shading, shading_factor};
 use crate::geometry::{
     Phase, Placement, detail_scale, patch_side, quilt, quilt_laid, resample_periodic, split_detail,
@@ -449,8 +450,10 @@ impl MaterialModel {
     }
 
     /// The BTF image for (view, light): the subspace images of the nearest measured pairs,
-    /// blended by their barycentric weights times the pairs' gains, then relit by bump mapping with the range map
-    /// (when the model has one). Only the subspaces needed are synthesized.
+    /// blended by their barycentric weights times the pairs' gains, then relit by bump mapping
+    /// with the range map and seen from the view with its parallax and masking
+    /// ([`parallax::view_warp`]) when the model has one. Only the subspaces needed are
+    /// synthesized.
     ///
     /// # Errors
     /// A non-finite direction or an invalid size.
@@ -537,6 +540,9 @@ impl MaterialModel {
         if let Some(heights) = &cache.heights {
             let shading = self.bump_shading(light)?;
             bump_relight(&mut out, heights, o.edges(), light, shading);
+            if let Some(warp) = parallax::view_warp(heights, o.edges(), view.vector()) {
+                out = warp.apply(&out);
+            }
         }
         Ok(out)
     }

@@ -3,6 +3,7 @@
 
 pub mod integrate;
 pub mod lattice;
+pub mod parallax;
 pub mod photometric_stereo;
 pub mod quilt;
 pub mod relight;

@@ -175,15 +175,7 @@ impl ShadowMarch<'_> {
     /// The bilinearly interpolated height at fractional (row, col).
     fn at(&self, r: f64, c: f64) -> f64 {
         let f = &self.field;
-        let (h, w) = f.heights.dim();
-        let (r0, c0) = (r.floor(), c.floor());
-        let (fr, fc) = (r - r0, c - c0);
-        let (r0, c0) = (r0 as isize, c0 as isize);
-        let (ra, rb) = (f.border.index(r0, h), f.border.index(r0 + 1, h));
-        let (ca, cb) = (f.border.index(c0, w), f.border.index(c0 + 1, w));
-        let v = &f.heights;
-        (v[[ra, ca]] * (1.0 - fc) + v[[ra, cb]] * fc) * (1.0 - fr)
-            + (v[[rb, ca]] * (1.0 - fc) + v[[rb, cb]] * fc) * fr
+        super::parallax::bilinear(f.heights.dim(), f.border, r, c, |i, j| f.heights[[i, j]])
     }
 }
 

@@ -148,19 +148,18 @@ pub struct Args {
     /// Stochastic textures are not affected.
     #[arg(long)]
     no_lattice: bool,
-    /// Which shadows the range map casts when synthesis relights it: `attached` (the
-    /// default: facets turned from the light go dark), `cast` (also where the relief blocks
-    /// the way to the light: a hard shadow ray marched over the heights, one texel a step, at
-    /// most 256 steps per pixel at synthesis and in the renderer's shader) or `auto`: cast
-    /// where those shadows leave at most 0.9 of the frontal photographs' variation
-    /// unexplained that attached shadows alone leave (built-in stones and sponge: 0.67 and
-    /// 0.53; the five RTI captures stay attached). Cast shadows bring the frontal view closer
-    /// (the built-in stones under nine frontal lights: 14 % closer to the measured images by
-    /// the texture judge) but the oblique views further (bench over all views: stones 6 %,
-    /// sponge 4 % further, and 0.2-0.56 Lab more colour error; why is not yet known). Cost: a 1024x1024 stones image takes about
-    /// a quarter more CPU time, and `render` about 2 s more to tabulate the shadowed mean
-    /// shading over light directions.
-    #[arg(long, value_enum, default_value_t = ShadowChoice::Attached)]
+    /// Which shadows the range map casts when synthesis relights it: `auto` (the default:
+    /// cast where those shadows leave at most 0.9 of the frontal photographs' variation
+    /// unexplained that attached shadows alone leave; built-in stones and sponge: 0.67 and
+    /// 0.53, cast; knit, leather and the five RTI captures: attached), `attached` (facets
+    /// turned from the light go dark) or `cast` (also where the relief blocks the way to the
+    /// light: a hard shadow ray marched over the heights, one texel a step, at most 256 steps
+    /// per pixel at synthesis and in the renderer's shader). Oblique views also see the
+    /// relief's parallax and masking, which hide the shadows behind the bumps (always on with
+    /// a range map). Cost of cast shadows: a 1024x1024 stones image takes about a quarter more
+    /// CPU time, and `render` about 2 s more to tabulate the shadowed mean shading over light
+    /// directions.
+    #[arg(long, value_enum, default_value_t = ShadowChoice::Auto)]
     shadows: ShadowChoice,
     /// Largest model file in bytes (0: no limit). A model above it drops its exemplar's
     /// principal deviations, the last first (8 KiB each at a 128 x 128 crop), until it fits,
@@ -273,7 +272,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                 .is_some_and(|m| m.shadows == Shadows::Cast)
         {
             eprintln!(
-                "note: the range map casts shadows: they explain the frontal photographs clearly better (oblique views may come out further from the photographs; --shadows attached turns them off)"
+                "note: the range map casts shadows: they explain the frontal photographs clearly better (--shadows attached turns them off)"
             );
         }
         emit(format!(

@@ -851,3 +851,121 @@ fn the_render_command_renders_an_lpca_sphere() {
     );
     assert!(!out.exists());
 }
+
+/// The CPU image `image` (a square tile, registered with the plane's texture) sampled
+/// bilinearly where each pixel of a `screen`-pixel render shows the plane under an
+/// orthographic camera at (`theta`, 270) (from the image's bottom: the plane fills the width,
+/// upright, its rows shrink by cos theta about the centre); 0 off the plane.
+fn foreshortened(image: &Array3<f32>, theta: f64, screen: usize) -> Array3<f32> {
+    let side = image.dim().1;
+    let shrink = theta.to_radians().cos();
+    let at = |v: f64, n: usize| -> Option<(usize, usize, f64)> {
+        let t = v * side as f64 - 0.5;
+        (0.0..=(side - 1) as f64).contains(&t).then(|| {
+            let i = t.floor() as usize;
+            (i, (i + 1).min(n - 1), t - t.floor())
+        })
+    };
+    Array3::from_shape_fn((3, screen, screen), |(ch, r, c)| {
+        let u = (c as f64 + 0.5) / screen as f64;
+        let v = ((r as f64 + 0.5) / screen as f64 - 0.5) / shrink + 0.5;
+        let (Some((y0, y1, ty)), Some((x0, x1, tx))) = (at(v, side), at(u, side)) else {
+            return 0.0;
+        };
+        let p = |y: usize, x: usize| f64::from(image[[ch, y, x]]);
+        let top = p(y0, x0) * (1.0 - tx) + p(y0, x1) * tx;
+        let bottom = p(y1, x0) * (1.0 - tx) + p(y1, x1) * tx;
+        (top * (1.0 - ty) + bottom * ty) as f32
+    })
+}
+
+/// Mean |a - b| over the pixels where both are lit, each image over its own mean there
+/// (the pair gains of two views differ in brightness, not in where things are).
+fn relative_difference(a: &Array3<f32>, b: &Array3<f32>) -> f64 {
+    let (_, h, w) = a.dim();
+    let inside: Vec<(usize, usize)> = (0..h)
+        .flat_map(|r| (0..w).map(move |c| (r, c)))
+        .filter(|&(r, c)| (0..3).all(|k| a[[k, r, c]] > 0.0 && b[[k, r, c]] > 0.0))
+        .collect();
+    let mean = |x: &Array3<f32>| {
+        inside
+            .iter()
+            .map(|&(r, c)| f64::from(x[[0, r, c]] + x[[1, r, c]] + x[[2, r, c]]))
+            .sum::<f64>()
+            / inside.len().max(1) as f64
+    };
+    let (ma, mb) = (mean(a), mean(b));
+    inside
+        .iter()
+        .map(|&(r, c)| {
+            let (sa, sb) = (
+                f64::from(a[[0, r, c]] + a[[1, r, c]] + a[[2, r, c]]),
+                f64::from(b[[0, r, c]] + b[[1, r, c]] + b[[2, r, c]]),
+            );
+            (sa / ma - sb / mb).abs()
+        })
+        .sum::<f64>()
+        / inside.len().max(1) as f64
+}
+
+/// From an oblique view the relief hides what is behind its bumps (geometry::parallax): the
+/// GPU's bump mapping marches the same view rays as the CPU. A flat plane under an
+/// orthographic camera at 60 degrees, towards the light and away from it: the GPU's image is
+/// close to the CPU's image for that view and far from the CPU's frontal image (no
+/// parallax), each foreshortened like the plane and over its own mean.
+#[test]
+fn the_gpu_sees_the_relief_from_an_oblique_view_as_the_cpu_does() {
+    let Some(renderer) = renderer() else { return };
+    let model = golden_model();
+    let side = 128;
+    let theta = 60.0;
+    let mesh = Mesh::plane(4, 1.0);
+    let options = ModelRenderOptions {
+        mapping: Mapping::Bump,
+        seed: 5,
+        texture_size: Some(side),
+        tile: side,
+        ..Default::default()
+    };
+    let cache = model
+        .synthesis_cache(&SynthesisOptions {
+            rows: side,
+            cols: side,
+            seed: 5,
+            tileable: true,
+        })
+        .unwrap();
+    for (view_phi, light) in [
+        (270.0, Direction::new(60.0, 270.0)),
+        (270.0, Direction::new(45.0, 90.0)),
+    ] {
+        let view = Direction::new(theta, view_phi);
+        // Two pixels a texel across: the foreshortened rows are not minified (a mip level
+        // would blur what the CPU's point samples keep).
+        let mut scene = flat_scene(2 * side as u32, light);
+        scene.camera.direction = view;
+        let gpu = renderer
+            .render_model(&model, &mesh, &scene, &options)
+            .unwrap();
+        let seen = model.image_from_cache(&cache, &view, &light).unwrap();
+        let frontal = model
+            .image_from_cache(&cache, &Direction::new(0.0, 0.0), &light)
+            .unwrap();
+        let (with, without) = (
+            relative_difference(&gpu.image, &foreshortened(&seen, theta, 2 * side)),
+            relative_difference(&gpu.image, &foreshortened(&frontal, theta, 2 * side)),
+        );
+        eprintln!(
+            "view {view:?}, light {light:?}: GPU against the CPU's view {with:.4}, against its frontal image {without:.4}"
+        );
+        // Measured: 0.07 and 0.17 against 0.84 and 0.79.
+        if with > 0.25 || with * 3.0 > without {
+            let cpu = foreshortened(&seen, theta, 2 * side);
+            let path = write_diff(&format!("oblique-{}", light.phi_deg), &gpu.image, &cpu);
+            panic!(
+                "the GPU does not see what the CPU sees from {view:?}: {with} against {without} without parallax; {}",
+                path.display()
+            );
+        }
+    }
+}

@@ -205,7 +205,7 @@ impl GpuLpca {
 
     /// Writes the uniforms of one frame (the point-light falloff as in the MRF pass).
     pub fn set_frame(&self, ctx: &GpuContext, scene: &Scene) {
-        self.common.write(ctx, scene, [0.0; 3]);
+        self.common.write(ctx, scene, ([0.0; 3], [0.0; 4]));
     }
 }
 

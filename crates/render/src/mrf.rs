@@ -20,8 +20,9 @@ use btfmrf::synthesis::SynthesisCache;
 const MRF_WGSL: &str = include_str!("../../../shaders/mrf.wgsl");
 
 /// The WGSL source of a mapping's pipeline: `common.wgsl`, the CPU's shading floor
-/// (`SHADING_FLOOR`, [`btfmrf::geometry::relight::SHADING_FLOOR`]), `mrf.wgsl`, then the
-/// mapping's own file.
+/// (`SHADING_FLOOR`, [`btfmrf::geometry::relight::SHADING_FLOOR`]), whether the relief's view
+/// parallax is marched (`VIEW_PARALLAX`: bump mapping; displaced geometry shows its own),
+/// `mrf.wgsl`, then the mapping's own file.
 pub fn shader_source(mapping: Mapping) -> String {
     let own = match mapping {
         Mapping::Bump => include_str!("../../../shaders/bump.wgsl"),
@@ -29,7 +30,10 @@ pub fn shader_source(mapping: Mapping) -> String {
         Mapping::Plain => include_str!("../../../shaders/plain.wgsl"),
     };
     let floor = btfmrf::geometry::relight::SHADING_FLOOR;
-    format!("{COMMON_WGSL}\nconst SHADING_FLOOR: f32 = {floor:?};\n{MRF_WGSL}\n{own}")
+    let parallax = mapping == Mapping::Bump;
+    format!(
+        "{COMMON_WGSL}\nconst SHADING_FLOOR: f32 = {floor:?};\nconst VIEW_PARALLAX: bool = {parallax};\n{MRF_WGSL}\n{own}"
+    )
 }
 
 /// The CPU side of a material on the GPU: what [`GpuMaterial::new`] uploads.
@@ -56,12 +60,22 @@ pub struct MaterialTables {
     /// Mean shading of the range map's normals (`None` without a range map), with its cast
     /// shadows where the map casts them.
     pub mean_shading: Option<MeanShading>,
-    /// Where the range map casts shadows: its highest height above its mean, tile texels (the
-    /// shader's shadow rays are free above it).
-    pub shadow_top: Option<f32>,
+    /// The range map's heights as the shader's rays need them; `None` without a range map.
+    pub relief_heights: Option<ReliefHeights>,
     /// Per measured light, the bump strength `k` of the shading factor `1 + k (s - 1)`
     /// ([`btfmrf::geometry::relight`]; 1 where the model stores none).
     pub light_strength: Vec<f32>,
+}
+
+/// The span of a range map's heights for the shader's rays (view parallax, cast shadows).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReliefHeights {
+    /// The highest height above the mean, tile texels (rays are free above it).
+    pub top: f32,
+    /// The lowest height, below the mean (negative), tile texels.
+    pub bottom: f32,
+    /// Whether the range map casts shadows.
+    pub casts_shadows: bool,
 }
 
 impl MaterialTables {
@@ -97,12 +111,11 @@ impl MaterialTables {
             .iter()
             .map(|d| d.theta_deg)
             .fold(0.0, f64::max);
+        let casts_shadows = model
+            .range_map()
+            .is_some_and(|m| m.shadows == Shadows::Cast);
         // The heights whose shadows the shader casts.
-        let cast = cache.heights().filter(|_| {
-            model
-                .range_map()
-                .is_some_and(|m| m.shadows == Shadows::Cast)
-        });
+        let cast = cache.heights().filter(|_| casts_shadows);
         // The cluster table is view-major, like the pair layers.
         let pair_layer = model
             .cluster_table()
@@ -125,9 +138,18 @@ impl MaterialTables {
                 Some(h) => MeanShading::with_cast_shadows(n, h, lowest),
                 None => MeanShading::new(n),
             }),
-            shadow_top: cast.map(|h| {
-                let top = h.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                (top - h.mean().unwrap_or(0.0)) as f32
+            relief_heights: cache.heights().map(|h| {
+                let mean = h.mean().unwrap_or(0.0);
+                let (top, bottom) = h
+                    .iter()
+                    .fold((f64::NEG_INFINITY, f64::INFINITY), |(t, b), &v| {
+                        (t.max(v), b.min(v))
+                    });
+                ReliefHeights {
+                    top: (top - mean) as f32,
+                    bottom: (bottom - mean) as f32,
+                    casts_shadows,
+                }
             }),
             light_strength: (0..nl)
                 .map(|l| model.range_map().map_or(1.0, |m| m.strength_of(l)) as f32)
@@ -170,28 +192,16 @@ pub struct GpuMaterial {
     pub tile: usize,
     /// True when the model has a range map.
     pub has_relief: bool,
-    /// See [`MaterialTables::shadow_top`].
-    pub shadow_top: Option<f32>,
+    /// See [`MaterialTables::relief_heights`].
+    pub relief_heights: Option<ReliefHeights>,
 }
 
-/// The mean-centred heights (tile texels, a square tile) for the shader's cast shadows, each
-/// texel the mean of a `2^skip`-texel square (the texture's side is the tile's over `2^skip`),
-/// row-major.
-fn shadow_heights(heights: &Array2<f64>, skip: u32) -> Vec<f32> {
+/// The mean-centred heights (tile texels) for the shader's rays, row-major, at the tile's full
+/// resolution whatever the other textures' (box-filtered heights hid less from an oblique
+/// view: a 128-texel texture's render of a 256-texel tile drifted from the 256-texel one).
+fn ray_heights(heights: &Array2<f64>) -> Vec<f32> {
     let mean = heights.mean().unwrap_or(0.0);
-    let block = 1usize << skip;
-    let side = heights.nrows() / block;
-    let mut out = Vec::with_capacity(side * side);
-    for y in 0..side {
-        for x in 0..side {
-            let b = heights.slice(ndarray::s![
-                y * block..(y + 1) * block,
-                x * block..(x + 1) * block
-            ]);
-            out.push((b.mean().unwrap_or(0.0) - mean) as f32);
-        }
-    }
-    out
+    heights.iter().map(|&h| (h - mean) as f32).collect()
 }
 
 /// Mip levels of a `side` x `side` texture (down to 1 x 1).
@@ -333,9 +343,9 @@ impl GpuMaterial {
             None => push_mip_chain(&mut relief_data, tile, skip, |_, _| [0.0, 0.0, 1.0, 0.0]),
         }
         let relief = ctx.checked("relief texture", || texture("relief", 1, &relief_data))?;
-        let (shadow_side, shadow_data) = match (heights, tables.shadow_top) {
-            (Some(h), Some(_)) => (size, shadow_heights(h, skip)),
-            _ => (1, vec![0.0]),
+        let (shadow_side, shadow_data) = match heights {
+            Some(h) => (tile, ray_heights(h)),
+            None => (1, vec![0.0]),
         };
         let shadow = ctx.checked("shadow heights", || {
             let bytes = bytemuck::cast_slice(&shadow_data);
@@ -423,7 +433,7 @@ impl GpuMaterial {
             size,
             tile,
             has_relief,
-            shadow_top: tables.shadow_top,
+            relief_heights: tables.relief_heights,
         })
     }
 
@@ -437,9 +447,12 @@ impl GpuMaterial {
                 0.0
             },
             mesh.world_per_uv / self.tile as f32,
-            self.shadow_top.unwrap_or(-1.0),
+            0.0,
         ];
-        self.common.write(ctx, scene, own);
+        let relief = self.relief_heights.map_or([0.0; 4], |r| {
+            [r.top, r.bottom, f32::from(u8::from(r.casts_shadows)), 0.0]
+        });
+        self.common.write(ctx, scene, (own, relief));
     }
 }
 

@@ -34,12 +34,14 @@ pub struct Globals {
     /// Where view and light directions are clamped ([`DirectionLut::max_theta`], radians),
     /// then the light's [`DirectionLut::horizon_z`].
     pub limits: [f32; 4],
+    /// The material's relief heights (see its shader).
+    pub relief: [f32; 4],
 }
 
 impl Globals {
     /// The uniforms of one frame of `scene`: `template` holds `counts` and `limits`, `own`
-    /// the material's `params.yzw`.
-    fn new(scene: &Scene, template: &Globals, own: [f32; 3]) -> Self {
+    /// the material's `params.yzw` and `relief`.
+    fn new(scene: &Scene, template: &Globals, (own, relief): ([f32; 3], [f32; 4])) -> Self {
         Self {
             view_proj: scene.camera.view_proj(scene.aspect()),
             camera: scene.camera.to_vec4(),
@@ -52,6 +54,7 @@ impl Globals {
             ],
             counts: template.counts,
             limits: template.limits,
+            relief,
         }
     }
 }
@@ -176,8 +179,9 @@ impl CommonBuffers {
         entries
     }
 
-    /// Writes the uniforms of one frame of `scene`; `own` are the material's `params.yzw`.
-    pub(crate) fn write(&self, ctx: &GpuContext, scene: &Scene, own: [f32; 3]) {
+    /// Writes the uniforms of one frame of `scene`; `own` are the material's `params.yzw` and
+    /// `relief`.
+    pub(crate) fn write(&self, ctx: &GpuContext, scene: &Scene, own: ([f32; 3], [f32; 4])) {
         let globals = Globals::new(scene, &self.template, own);
         ctx.queue
             .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
