@@ -17,6 +17,16 @@ use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
 use ndarray::Array3;
 
+/// Options for a `rows` x `cols` image of seed `seed`, not tileable.
+fn plain_options(rows: usize, cols: usize, seed: u64) -> SynthesisOptions {
+    SynthesisOptions {
+        rows,
+        cols,
+        seed,
+        tileable: false,
+    }
+}
+
 /// The shared data folder: `$BTFMRF_DATA`, else `../shared/data` beside the repository.
 fn data(rel: &str) -> PathBuf {
     std::env::var_os("BTFMRF_DATA")
@@ -177,12 +187,7 @@ fn per_subspace<T>(
     model: &MaterialModel,
     compare: impl Fn(&Array3<f32>, &Array3<f32>) -> T,
 ) -> Vec<T> {
-    let o = SynthesisOptions {
-        rows: btf.height() as usize,
-        cols: btf.width() as usize,
-        seed: 7,
-        tileable: false,
-    };
+    let o = plain_options(btf.height() as usize, btf.width() as usize, 7);
     model
         .subspaces()
         .iter()
@@ -203,12 +208,7 @@ fn subspace_colours(btf: &Btf, model: &MaterialModel) -> Vec<Colour> {
 /// Whole relit images of `model` (seed 7, measured size) against the measured images of the
 /// frontal view under every `stride`-th light.
 fn image_colours(btf: &Btf, model: &MaterialModel, stride: usize) -> Vec<Colour> {
-    let o = SynthesisOptions {
-        rows: btf.height() as usize,
-        cols: btf.width() as usize,
-        seed: 7,
-        tileable: false,
-    };
+    let o = plain_options(btf.height() as usize, btf.width() as usize, 7);
     let view = btfmrf::geometry::frontal_view(btf);
     let cache = model.synthesis_cache(&o).unwrap();
     (0..btf.lights().len())
@@ -226,12 +226,7 @@ fn image_colours(btf: &Btf, model: &MaterialModel, stride: usize) -> Vec<Colour>
 /// images at full, half and quarter resolution, and the mean absolute angle difference where
 /// the measured coherence exceeds 0.1.
 fn orientation_row(btf: &Btf, model: &MaterialModel) -> String {
-    let o = SynthesisOptions {
-        rows: btf.height() as usize,
-        cols: btf.width() as usize,
-        seed: 7,
-        tileable: false,
-    };
+    let o = plain_options(btf.height() as usize, btf.width() as usize, 7);
     let mut out = String::new();
     for halvings in 0..3 {
         let (mut cm, mut cs, mut da, mut n, mut na) = (0.0, 0.0, 0.0, 0.0, 0.0f64);
@@ -482,12 +477,7 @@ fn band_marginals_round_trip_and_version_1_models_still_read() {
         }
     }
     // Matching the bands changes the synthesis, deterministically.
-    let o = SynthesisOptions {
-        rows: 48,
-        cols: 48,
-        seed: 3,
-        tileable: false,
-    };
+    let o = plain_options(48, 48, 3);
     let mut parts = model.clone().into_parts();
     for s in &mut parts.subspaces {
         s.band_marginals = None;
@@ -519,12 +509,7 @@ fn measured_pairs_come_back_at_their_measured_brightness() {
     let mut parts = model.clone().into_parts();
     parts.pair_gains.clear();
     let plain = MaterialModel::new(parts).unwrap();
-    let o = SynthesisOptions {
-        rows: 64,
-        cols: 64,
-        seed: 1,
-        tileable: false,
-    };
+    let o = plain_options(64, 64, 1);
     let view = *btf.views().get(0).unwrap();
     let worst = |m: &MaterialModel| {
         let cache = m.synthesis_cache(&o).unwrap();
@@ -584,12 +569,7 @@ fn a_stone_keeps_its_own_colour() {
         "the file holds the exemplar as analysed"
     );
     assert_eq!(btfmrf::model::format::to_bytes(&back), file);
-    let o = SynthesisOptions {
-        rows: 64,
-        cols: 64,
-        seed: 1,
-        tileable: false,
-    };
+    let o = plain_options(64, 64, 1);
     let cache = model.synthesis_cache(&o).unwrap();
     let view = *btf.views().get(0).unwrap();
     let mut ratios = Vec::new();
@@ -619,12 +599,7 @@ fn a_stone_keeps_its_own_colour() {
 fn a_relit_synthesis_has_its_representatives_lightness() {
     let btf = Btf::synthetic(SyntheticMaterial::Sponge, 64, 5).unwrap();
     let view = *btf.views().get(0).unwrap();
-    let o = SynthesisOptions {
-        rows: 64,
-        cols: 64,
-        seed: 1,
-        tileable: false,
-    };
+    let o = plain_options(64, 64, 1);
     let worst = |lit_matching: bool| {
         let options = AnalysisOptions {
             clusters: 8,
@@ -674,12 +649,7 @@ fn relit_highlights_stay_in_range_and_keep_their_colour() {
         ..AnalysisOptions::default()
     };
     let model = analyze(&btf, &options, &NoProgress).unwrap().0;
-    let o = SynthesisOptions {
-        rows: 64,
-        cols: 64,
-        seed: 1,
-        tileable: false,
-    };
+    let o = plain_options(64, 64, 1);
     let cache = model.synthesis_cache(&o).unwrap();
     let (mut sums, mut over, mut values) = ([[0.0; 2]; 4], 0, 0);
     for (v, l) in fidelity_pairs(&btf, 8) {

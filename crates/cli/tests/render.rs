@@ -15,7 +15,7 @@ use btfmrf::geometry::relight::Shadows;
 use btfmrf::lpca::{self, LpcaModel, LpcaOptions, Method};
 use btfmrf::model::{MaterialModel, RangeMap, format};
 use btfmrf::progress::NoProgress;
-use btfmrf::synthesis::SynthesisOptions;
+use btfmrf::synthesis::{SynthesisCache, SynthesisOptions};
 use btfmrf_render::headless::ModelRenderOptions;
 use btfmrf_render::scene::Projection;
 use btfmrf_render::{Camera, Light, Mapping, Mesh, MeshKind, RenderError, Renderer, Scene};
@@ -112,6 +112,30 @@ fn flat_scene(side: u32, light: Direction) -> Scene {
     }
 }
 
+/// A plane with one texture repetition of `side` texels, bump mapped at seed 5.
+fn bump_plane(side: usize) -> (Mesh, ModelRenderOptions) {
+    let options = ModelRenderOptions {
+        mapping: Mapping::Bump,
+        seed: 5,
+        texture_size: Some(side),
+        tile: side,
+        ..Default::default()
+    };
+    (Mesh::plane(4, 1.0), options)
+}
+
+/// A fresh CPU cache of the texture [`bump_plane`] renders (tileable, `side` texels, seed 5).
+fn tile_cache(model: &MaterialModel, side: usize) -> SynthesisCache {
+    model
+        .synthesis_cache(&SynthesisOptions {
+            rows: side,
+            cols: side,
+            seed: 5,
+            tileable: true,
+        })
+        .unwrap()
+}
+
 /// Renders `model` on a flat plane, seen from above, under each of `lights` (directional) and
 /// compares with the CPU's [`MaterialModel::image_from_cache`]: the same clusters
 /// synthesized, and at most 1% of the peak apart anywhere but in a share `flipped` of the
@@ -125,27 +149,13 @@ fn assert_gpu_matches_cpu(
     flipped: f64,
 ) {
     let side = 128;
-    let mesh = Mesh::plane(4, 1.0);
-    let options = ModelRenderOptions {
-        mapping: Mapping::Bump,
-        seed: 5,
-        texture_size: Some(side),
-        tile: side,
-        ..Default::default()
-    };
+    let (mesh, options) = bump_plane(side);
     for (i, &light) in lights.iter().enumerate() {
         let scene = flat_scene(side as u32, light);
         let gpu = renderer
             .render_model(model, &mesh, &scene, &options)
             .unwrap();
-        let cache = model
-            .synthesis_cache(&SynthesisOptions {
-                rows: side,
-                cols: side,
-                seed: 5,
-                tileable: true,
-            })
-            .unwrap();
+        let cache = tile_cache(model, side);
         let cpu = model
             .image_from_cache(&cache, &Direction::new(0.0, 0.0), &light)
             .unwrap();
@@ -919,22 +929,8 @@ fn the_gpu_sees_the_relief_from_an_oblique_view_as_the_cpu_does() {
     let model = golden_model();
     let side = 128;
     let theta = 60.0;
-    let mesh = Mesh::plane(4, 1.0);
-    let options = ModelRenderOptions {
-        mapping: Mapping::Bump,
-        seed: 5,
-        texture_size: Some(side),
-        tile: side,
-        ..Default::default()
-    };
-    let cache = model
-        .synthesis_cache(&SynthesisOptions {
-            rows: side,
-            cols: side,
-            seed: 5,
-            tileable: true,
-        })
-        .unwrap();
+    let (mesh, options) = bump_plane(side);
+    let cache = tile_cache(&model, side);
     for (view_phi, light) in [
         (270.0, Direction::new(60.0, 270.0)),
         (270.0, Direction::new(45.0, 90.0)),
