@@ -355,3 +355,61 @@ fn a_relief_casts_the_shadows_its_photographs_show() {
         assert_eq!(model.range_map().unwrap().shadows, chosen, "{material}");
     }
 }
+
+/// The mean step across the wrap-around line of `image` (last column to first, and last row
+/// to first) over the median step across its interior lines, the larger of the two
+/// directions: about 1 for an image that tiles.
+fn wrap_step_ratio(image: &ndarray::Array3<f32>) -> f64 {
+    let (_, h, w) = image.dim();
+    let column_step = |x: usize, next: usize| -> f64 {
+        image
+            .outer_iter()
+            .map(|p| {
+                (0..h)
+                    .map(|y| f64::from((p[[y, next]] - p[[y, x]]).abs()))
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            / (3 * h) as f64
+    };
+    let row_step = |y: usize, next: usize| -> f64 {
+        image
+            .outer_iter()
+            .map(|p| {
+                (0..w)
+                    .map(|x| f64::from((p[[next, x]] - p[[y, x]]).abs()))
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            / (3 * w) as f64
+    };
+    let columns: Vec<f64> = (0..w - 1).map(|x| column_step(x, x + 1)).collect();
+    let rows: Vec<f64> = (0..h - 1).map(|y| row_step(y, y + 1)).collect();
+    (column_step(w - 1, 0) / median(columns)).max(row_step(h - 1, 0) / median(rows))
+}
+
+/// An oblique view of a tileable synthesis still tiles: the view's parallax marches its rays
+/// across the wrap-around (`geometry::parallax` over wrapped heights), so the step across the
+/// image's wrap-around lines is like the steps across its interior lines. Measured: 1.05 (a
+/// march over clamped heights instead: 2.56); the same view made without `tileable`: 3.42.
+#[test]
+fn an_oblique_view_of_a_tileable_synthesis_still_tiles() {
+    use btfmrf::analysis::{AnalysisOptions, analyze};
+    use btfmrf::synthesis::SynthesisOptions;
+    let btf = Btf::synthetic(SyntheticMaterial::Stones, 64, 3).unwrap();
+    let (model, _) = analyze(&btf, &AnalysisOptions::default(), &NoProgress).unwrap();
+    let (view, light) = (Direction::new(60.0, 36.0), Direction::new(45.0, 200.0));
+    let ratio = |tileable| {
+        let o = SynthesisOptions {
+            rows: 128,
+            cols: 128,
+            seed: 2,
+            tileable,
+        };
+        wrap_step_ratio(&model.synthesize_image(&view, &light, &o).unwrap())
+    };
+    let (tiled, plain) = (ratio(true), ratio(false));
+    println!("wrap-around step over the median step: tileable {tiled:.2}, plain {plain:.2}");
+    assert!(tiled < 1.5, "tileable {tiled}");
+    assert!(plain > 1.5, "plain {plain}: the statistic sees no seam");
+}
