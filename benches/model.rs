@@ -85,6 +85,18 @@ fn bench_synthesis(c: &mut Criterion) {
                 )
             })
         });
+        // The same light from an oblique measured view: the relit image is warped by the
+        // view's parallax and masking.
+        let oblique = Direction::new(60.0, 36.0);
+        group.bench_function(BenchmarkId::new("one_image_oblique", kind.name()), |b| {
+            b.iter(|| {
+                black_box(
+                    model
+                        .synthesize_image(&oblique, &light, &o)
+                        .expect("synthesis"),
+                )
+            })
+        });
         // The same image made tileable (the CAR models solved on the torus by the DFT).
         group.bench_function(BenchmarkId::new("one_image_tileable", kind.name()), |b| {
             b.iter(|| {
