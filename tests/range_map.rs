@@ -360,32 +360,23 @@ fn a_relief_casts_the_shadows_its_photographs_show() {
 /// to first) over the median step across its interior lines, the larger of the two
 /// directions: about 1 for an image that tiles.
 fn wrap_step_ratio(image: &ndarray::Array3<f32>) -> f64 {
-    let (_, h, w) = image.dim();
-    let column_step = |x: usize, next: usize| -> f64 {
-        image
-            .outer_iter()
-            .map(|p| {
-                (0..h)
-                    .map(|y| f64::from((p[[y, next]] - p[[y, x]]).abs()))
-                    .sum::<f64>()
-            })
-            .sum::<f64>()
-            / (3 * h) as f64
+    // Columns of `image`, then of its transpose (the rows).
+    let ratio = |image: ndarray::ArrayView3<f32>| {
+        let (c, h, w) = image.dim();
+        let step = |x: usize, next: usize| -> f64 {
+            image
+                .outer_iter()
+                .map(|p| {
+                    (0..h)
+                        .map(|y| f64::from((p[[y, next]] - p[[y, x]]).abs()))
+                        .sum::<f64>()
+                })
+                .sum::<f64>()
+                / (c * h) as f64
+        };
+        step(w - 1, 0) / median((0..w - 1).map(|x| step(x, x + 1)).collect())
     };
-    let row_step = |y: usize, next: usize| -> f64 {
-        image
-            .outer_iter()
-            .map(|p| {
-                (0..w)
-                    .map(|x| f64::from((p[[next, x]] - p[[y, x]]).abs()))
-                    .sum::<f64>()
-            })
-            .sum::<f64>()
-            / (3 * w) as f64
-    };
-    let columns: Vec<f64> = (0..w - 1).map(|x| column_step(x, x + 1)).collect();
-    let rows: Vec<f64> = (0..h - 1).map(|y| row_step(y, y + 1)).collect();
-    (column_step(w - 1, 0) / median(columns)).max(row_step(h - 1, 0) / median(rows))
+    ratio(image.view()).max(ratio(image.view().permuted_axes([0, 2, 1])))
 }
 
 /// An oblique view of a tileable synthesis still tiles: the view's parallax marches its rays
