@@ -36,7 +36,7 @@ const NO_LAYER: u32 = 0xffffffffu;
 @group(0) @binding(11) var<storage, read> pair_gain: array<f32>;
 // The range map's heights (tile texels above their mean) in single precision, read unfiltered
 // for the view parallax and the cast shadows (1 x 1 without a range map).
-@group(0) @binding(12) var shadow_heights: texture_2d<f32>;
+@group(0) @binding(12) var ray_heights: texture_2d<f32>;
 
 // Mean of max(0, n . l) over the texture for the projected tangent-frame light direction q
 // (bilinear in the table).
@@ -52,18 +52,18 @@ fn mean_shading(q: vec2<f32>) -> f32 {
     return mix(top, bottom, t.y);
 }
 
-// The shadow heights at texel coordinates p (texel centres at integers), bilinear between
+// The ray heights at texel coordinates p (texel centres at integers), bilinear between
 // the four texels around it, wrapped (the CPU's ShadowMarch reads its heights so).
-fn shadow_height(p: vec2<f32>) -> f32 {
-    let n = vec2<i32>(textureDimensions(shadow_heights));
+fn ray_height(p: vec2<f32>) -> f32 {
+    let n = vec2<i32>(textureDimensions(ray_heights));
     let f = floor(p);
     let t = p - f;
     let i = vec2<i32>(f);
     let h = array<f32, 4>(
-        textureLoad(shadow_heights, ((i % n) + n) % n, 0).r,
-        textureLoad(shadow_heights, ((i + vec2<i32>(1, 0)) % n + n) % n, 0).r,
-        textureLoad(shadow_heights, ((i + vec2<i32>(0, 1)) % n + n) % n, 0).r,
-        textureLoad(shadow_heights, ((i + vec2<i32>(1, 1)) % n + n) % n, 0).r,
+        textureLoad(ray_heights, ((i % n) + n) % n, 0).r,
+        textureLoad(ray_heights, ((i + vec2<i32>(1, 0)) % n + n) % n, 0).r,
+        textureLoad(ray_heights, ((i + vec2<i32>(0, 1)) % n + n) % n, 0).r,
+        textureLoad(ray_heights, ((i + vec2<i32>(1, 1)) % n + n) % n, 0).r,
     );
     return mix(mix(h[0], h[1], t.x), mix(h[2], h[3], t.x), t.y);
 }
@@ -77,19 +77,19 @@ fn cast_light(uv: vec2<f32>, l: vec3<f32>) -> f32 {
     if (globals.relief.z < 0.5 || horizontal < 1e-6) {
         return 1.0;
     }
-    let size = f32(textureDimensions(shadow_heights).x);
+    let size = f32(textureDimensions(ray_heights).x);
     // uv's v runs down the rows, the light's y up; heights are in tile texels.
     let dir = vec2<f32>(l.x, -l.y) / horizontal;
     let rise = l.z / horizontal * globals.params.y / size;
     let p = uv * size - vec2<f32>(0.5);
-    let z = shadow_height(p) + SHADOW_TOLERANCE;
+    let z = ray_height(p) + SHADOW_TOLERANCE;
     let steps = min(u32(size), MAX_SHADOW_STEPS);
     for (var t = 1u; t <= steps; t++) {
         let ray = z + f32(t) * rise;
         if (ray >= top) {
             return 1.0;
         }
-        if (shadow_height(p + f32(t) * dir) > ray) {
+        if (ray_height(p + f32(t) * dir) > ray) {
             return 0.0;
         }
     }
@@ -105,7 +105,7 @@ fn seen_uv(uv: vec2<f32>, v: vec3<f32>) -> vec2<f32> {
     if (!VIEW_PARALLAX || globals.params.y < 0.5 || v.z <= 0.0 || horizontal < 1e-6) {
         return uv;
     }
-    let size = f32(textureDimensions(shadow_heights).x);
+    let size = f32(textureDimensions(ray_heights).x);
     // Towards the camera: uv's v runs down the rows, the view's y up; heights in tile texels.
     let dir = vec2<f32>(v.x, -v.y) / horizontal;
     let rise = v.z / horizontal * globals.params.y / size;
@@ -116,7 +116,7 @@ fn seen_uv(uv: vec2<f32>, v: vec3<f32>) -> vec2<f32> {
     var s = first;
     var hit = last;
     loop {
-        if (shadow_height(p + s * dir) >= s * rise) {
+        if (ray_height(p + s * dir) >= s * rise) {
             hit = s;
             break;
         }
@@ -130,7 +130,7 @@ fn seen_uv(uv: vec2<f32>, v: vec3<f32>) -> vec2<f32> {
     var hi = above;
     for (var i = 0u; i < REFINE_STEPS; i++) {
         let mid = 0.5 * (lo + hi);
-        if (shadow_height(p + mid * dir) >= mid * rise) {
+        if (ray_height(p + mid * dir) >= mid * rise) {
             lo = mid;
         } else {
             hi = mid;

@@ -50,6 +50,16 @@ pub(crate) fn bilinear(
         + (at(rb, ca) * (1.0 - fc) + at(rb, cb) * fc) * fr
 }
 
+/// The highest and the lowest of `heights` (texels): where a view ray starts and where it
+/// must have met the relief (infinite for an empty field).
+pub fn height_span(heights: &Array2<f64>) -> (f64, f64) {
+    heights
+        .iter()
+        .fold((f64::NEG_INFINITY, f64::INFINITY), |(t, b), &h| {
+            (t.max(h), b.min(h))
+        })
+}
+
 /// The warp of `heights` (texels, borders as `border` says) seen from the unit view `v`
 /// (x right, y up, z out of the surface); `None` for a frontal view (nothing moves), a view
 /// at or below the horizon, or an empty field.
@@ -63,11 +73,7 @@ pub fn view_warp(heights: &Array2<f64>, border: Edges, v: [f64; 3]) -> Option<Vi
         return None;
     }
     let (rows, cols) = heights.dim();
-    let (top, bottom) = heights
-        .iter()
-        .fold((f64::NEG_INFINITY, f64::INFINITY), |(t, b), &h| {
-            (t.max(h), b.min(h))
-        });
+    let (top, bottom) = height_span(heights);
     let reference = heights.mean()?;
     // Per texel towards the camera: columns right, rows down (y is up), height gained.
     let (dc, dr, rise) = (v[0] / horizontal, -v[1] / horizontal, v[2] / horizontal);

@@ -122,7 +122,7 @@ impl<'a> ShadowField<'a> {
         Self {
             heights,
             border,
-            top: heights.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            top: super::parallax::height_span(heights).0,
             // Beyond the field's size a clamped ray sees only the repeated edge; a wrapped
             // one has crossed every height it can meet.
             steps: h.max(w).min(MAX_SHADOW_STEPS),

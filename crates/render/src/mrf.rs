@@ -140,11 +140,7 @@ impl MaterialTables {
             }),
             relief_heights: cache.heights().map(|h| {
                 let mean = h.mean().unwrap_or(0.0);
-                let (top, bottom) = h
-                    .iter()
-                    .fold((f64::NEG_INFINITY, f64::INFINITY), |(t, b), &v| {
-                        (t.max(v), b.min(v))
-                    });
+                let (top, bottom) = btfmrf::geometry::parallax::height_span(h);
                 ReliefHeights {
                     top: (top - mean) as f32,
                     bottom: (bottom - mean) as f32,
@@ -343,15 +339,15 @@ impl GpuMaterial {
             None => push_mip_chain(&mut relief_data, tile, skip, |_, _| [0.0, 0.0, 1.0, 0.0]),
         }
         let relief = ctx.checked("relief texture", || texture("relief", 1, &relief_data))?;
-        let (shadow_side, shadow_data) = match heights {
+        let (ray_side, ray_data) = match heights {
             Some(h) => (tile, ray_heights(h)),
             None => (1, vec![0.0]),
         };
-        let shadow = ctx.checked("shadow heights", || {
-            let bytes = bytemuck::cast_slice(&shadow_data);
+        let rays = ctx.checked("ray heights", || {
+            let bytes = bytemuck::cast_slice(&ray_data);
             upload(
-                "shadow heights",
-                shadow_side,
+                "ray heights",
+                ray_side,
                 1,
                 wgpu::TextureFormat::R32Float,
                 1,
@@ -384,7 +380,7 @@ impl GpuMaterial {
             ..Default::default()
         });
         let relief_view = relief.create_view(&wgpu::TextureViewDescriptor::default());
-        let shadow_view = shadow.create_view(&wgpu::TextureViewDescriptor::default());
+        let ray_view = rays.create_view(&wgpu::TextureViewDescriptor::default());
         let mut entries = common.entries();
         entries.extend([
             wgpu::BindGroupEntry {
@@ -413,7 +409,7 @@ impl GpuMaterial {
             },
             wgpu::BindGroupEntry {
                 binding: 12,
-                resource: wgpu::BindingResource::TextureView(&shadow_view),
+                resource: wgpu::BindingResource::TextureView(&ray_view),
             },
             wgpu::BindGroupEntry {
                 binding: 11,
