@@ -21,7 +21,8 @@ use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::parallax;
 use crate::geometry::relight::{SHADING_FLOOR, Shading, shading_factor};
 use crate::geometry::{
-    Phase, Placement, detail_scale, patch_side, quilt, quilt_laid, resample_periodic, split_detail,
+    Phase, Placement, QuiltedRelief, detail_scale, patch_side, quilt, quilt_laid,
+    resample_periodic, split_detail,
 };
 use crate::model::{Exemplar, LitMarginals, MaterialModel, ModelError, PeriodicPart, Result};
 use crate::mrf::noise::standard_normal;
@@ -308,11 +309,18 @@ impl MaterialModel {
         } else {
             Border::Mirror
         };
-        let bands = s.levels.visit(SynthesizeBands {
-            shapes: &shapes,
-            options: o,
-            noise,
-        });
+        // The exemplar's quilt does not depend on the bands: laid while they are drawn.
+        let lays_exemplar = self.exemplar().is_some() && s.kl.space == ColourSpace::Lab;
+        let (bands, _) = rayon::join(
+            || {
+                s.levels.visit(SynthesizeBands {
+                    shapes: &shapes,
+                    options: o,
+                    noise,
+                })
+            },
+            || lays_exemplar && structure.get_or_init(|| self.exemplar_details(o)).is_some(),
+        );
         let (band_probabilities, factor_probabilities) = (
             marginals::band_probabilities(),
             s.marginal_grid.probabilities(marginals::QUANTILES),
@@ -475,20 +483,22 @@ impl MaterialModel {
     pub fn synthesis_cache(&self, o: &SynthesisOptions) -> Result<SynthesisCache> {
         check(self, o)?;
         Ok(match self.laid_together(o) {
-            Some((heights, detail)) => self.cache_laid(o, heights, detail, NoiseBank::kept()),
+            Some((relief, detail)) => self.cache_laid(o, relief, detail, NoiseBank::kept()),
             None => self.empty_cache(o, self.range_heights(o), NoiseBank::kept()),
         })
     }
 
-    /// An empty cache holding the range map's heights and the exemplar details laid with them
-    /// by one quilt ([`MaterialModel::laid_together`]).
+    /// An empty cache holding the range map's heights (integrated here from the quilted
+    /// `relief`) and the exemplar details laid with them by one quilt
+    /// ([`MaterialModel::laid_together`]).
     fn cache_laid(
         &self,
         o: &SynthesisOptions,
-        heights: Array2<f64>,
+        relief: QuiltedRelief,
         details: LaidExemplar,
         noise: NoiseBank,
     ) -> SynthesisCache {
+        let heights = cropped(relief.integrate(), o.rows, o.cols);
         let cache = self.empty_cache(o, Some(heights), noise);
         cache
             .structure
@@ -605,7 +615,7 @@ impl MaterialModel {
         };
         let cache = match self.laid_together(o) {
             // The exemplar detail every image needs comes with the heights, from one quilt.
-            Some((heights, detail)) => first(self.cache_laid(o, heights, detail, noise))?,
+            Some((relief, detail)) => first(self.cache_laid(o, relief, detail, noise))?,
             // The first image draws every band's noise; the others reuse it, in parallel.
             None => first(self.empty_cache(o, self.range_heights(o), noise))?,
         };
@@ -660,7 +670,7 @@ impl MaterialModel {
             }
         });
         // In phase the cuts matter little (few candidates fit a patch's phase): the mean crop
-        // guides, and being one of the laid planes it is integrated once, not twice.
+        // guides. The guide's own quilt is not integrated: only the laid crops are used.
         let guide = if phase.is_some() {
             e.plane(0)?
         } else {
@@ -673,7 +683,7 @@ impl MaterialModel {
     /// exemplar's zero-mean basis details from one quilt ([`quilt_laid`]), when the exemplar is
     /// registered with a map sampled at every pixel and no lattice lays the relief: a pit in
     /// the relief and its dark colour then stay together. `None` otherwise.
-    fn laid_together(&self, o: &SynthesisOptions) -> Option<(Array2<f64>, LaidExemplar)> {
+    fn laid_together(&self, o: &SynthesisOptions) -> Option<(QuiltedRelief, LaidExemplar)> {
         let (map, e) = (self.range_map()?, self.exemplar()?);
         if map.step != 1 || (map.rows, map.cols) != (e.rows, e.cols) || self.periodic().is_some() {
             return None;
@@ -760,9 +770,9 @@ fn cropped(field: Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
 
 /// Mixed into the synthesis seed for the range map's quilt (the bands use their own indices).
 const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
-/// `guide` quilted for the output of `o` (on [`quilt_torus`], then cropped) with the
-/// exemplar's basis crops laid by the same patches ([`quilt_laid`]): the guide's quilt and
-/// the crops with their placement on the output; with a phase, every patch keeps the
+/// `guide` quilted for the output of `o` (on [`quilt_torus`]) with the exemplar's basis crops
+/// laid by the same patches ([`quilt_laid`]): the guide's quilt on the torus, not yet
+/// integrated, and the crops with their placement on the output; with a phase, every patch keeps the
 /// lattice's phase. The mean crop's colour (its a* and b*, and its L* when the guide is not
 /// itself a lightness) helps the guide choose the patches and cuts, so fewer cuts join two
 /// colours on one flat surface.
@@ -771,12 +781,12 @@ fn laid_exemplar(
     e: &Exemplar,
     o: &SynthesisOptions,
     (seed, phase, guide_is_lightness): (u64, Option<&Phase>, bool),
-) -> (Array2<f64>, LaidExemplar) {
+) -> (QuiltedRelief, LaidExemplar) {
     let torus = quilt_torus(o, patch_side(e.rows, e.cols));
     let (planes, matched) = exemplar_planes(e, guide_is_lightness);
-    let (guide, placement) = quilt_laid(guide, &planes, &matched, torus, seed, phase);
+    let (relief, placement) = quilt_laid(guide, &planes, &matched, torus, seed, phase);
     (
-        cropped(guide, o.rows, o.cols),
+        relief,
         LaidExemplar {
             placement: placement.cropped(o.rows, o.cols),
             planes,

@@ -11,7 +11,8 @@ pub mod relight;
 pub use integrate::{frankot_chellappa, integrate_on_torus, normals_of};
 pub use photometric_stereo::{NormalMap, estimate_normals, frontal_view};
 pub use quilt::{
-    Phase, Placement, detail_scale, patch_side, quilt, quilt_laid, resample_periodic, split_detail,
+    Phase, Placement, QuiltedRelief, detail_scale, patch_side, quilt, quilt_laid,
+    resample_periodic, split_detail,
 };
 
 use ndarray::Array2;
