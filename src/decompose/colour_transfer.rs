@@ -9,7 +9,7 @@
 
 use ndarray::{Array2, Zip};
 
-use super::marginals::{MarginalMap, band_probabilities, quantiles_at};
+use super::marginals::{self, MarginalMap, band_probabilities, quantiles_at};
 
 /// Orthonormal colour bases the marginals are matched along: the colour axes themselves
 /// (last at synthesis, so the L*, a*, b* marginals end exact) and three fixed rotations.
@@ -64,9 +64,15 @@ fn project(planes: &[Array2<f64>; 3], basis: &[[f64; 3]; 3]) -> [Array2<f64>; 3]
             .and(&planes[0])
             .and(&planes[1])
             .and(&planes[2])
-            .par_for_each(|p, &a, &b, &c| *p = axis[0] * a + axis[1] * b + axis[2] * c);
+            .par_for_each(|p, &a, &b, &c| *p = dot(axis, [a, b, c]));
         p
     })
+}
+
+/// `axis . colour`, summed in coordinate order.
+#[inline]
+fn dot(axis: [f64; 3], colour: [f64; 3]) -> f64 {
+    axis[0] * colour[0] + axis[1] * colour[1] + axis[2] * colour[2]
 }
 
 /// Equal-count bins of the first colour coordinate (L*) over which [`ColourMarginals`] keeps
@@ -158,20 +164,37 @@ impl ColourMarginals {
     /// Moves the colours of `planes` towards these marginals: the coupling first
     /// ([`ColourMarginals::couple`]), then [`PASSES`] passes over the rotations, each axis
     /// matched in turn, the colour axes last.
+    ///
+    /// Each rotation is one pass over the pixels, in place; its three maps come from the
+    /// projected colours of the regular subsample that
+    /// [`quantiles_at`](crate::decompose::marginals::quantiles_at) takes of a plane.
     pub fn transfer(&self, planes: &mut [Array2<f64>; 3]) {
         self.couple(planes);
         let probabilities = band_probabilities();
+        let (len, cols) = (planes[0].len(), planes[0].ncols());
+        let stride = marginals::sample_step(len, cols);
         let order = (1..ROTATIONS).chain([0]);
         for r in std::iter::repeat_n(order, PASSES).flatten() {
             let basis = rotation(r);
-            let mut projected = project(planes, &basis);
-            for (k, p) in projected.iter_mut().enumerate() {
-                let map = MarginalMap::new(p, &self.tables[3 * r + k], &probabilities);
-                p.par_mapv_inplace(|v| map.apply(v));
-            }
-            // Back to the colour axes: the basis is orthonormal, so its transpose inverts it.
-            let transposed = std::array::from_fn(|c| std::array::from_fn(|k| basis[k][c]));
-            *planes = project(&projected, &transposed);
+            let [l, a, b] = planes;
+            let subsample: Vec<[f64; 3]> = (l.iter().step_by(stride))
+                .zip(a.iter().step_by(stride))
+                .zip(b.iter().step_by(stride))
+                .map(|((&l, &a), &b)| [l, a, b])
+                .collect();
+            let maps: [MarginalMap; 3] = std::array::from_fn(|k| {
+                let axis = basis[k];
+                let projected = subsample.iter().map(|c| dot(axis, *c));
+                let quantiles = marginals::sample_quantiles(projected, &probabilities);
+                MarginalMap::between(quantiles, &self.tables[3 * r + k], len)
+            });
+            Zip::from(l).and(a).and(b).par_for_each(|l, a, b| {
+                let colour = [*l, *a, *b];
+                let p: [f64; 3] = std::array::from_fn(|k| maps[k].apply(dot(basis[k], colour)));
+                // Back to the colour axes: the basis is orthonormal, so its transpose inverts it.
+                let back = |c: usize| dot([basis[0][c], basis[1][c], basis[2][c]], p);
+                (*l, *a, *b) = (back(0), back(1), back(2));
+            });
         }
     }
 }

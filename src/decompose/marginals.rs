@@ -79,7 +79,7 @@ pub fn quantiles(plane: &Array2<f64>, grid: QuantileGrid) -> Quantiles {
 /// move along the row from one row to the next. A step that divides the row length takes the
 /// same columns in every row: 16 of a 1024^2 knit's, in step with its weave, whose quantiles
 /// then came out of the threads alone (its lit synthesis twice as bright as at 64^2).
-fn sample_step(len: usize, cols: usize) -> usize {
+pub(crate) fn sample_step(len: usize, cols: usize) -> usize {
     let gcd = |mut a: usize, mut b: usize| {
         while b != 0 {
             (a, b) = (b, a % b);
@@ -96,12 +96,15 @@ fn sample_step(len: usize, cols: usize) -> usize {
 /// The quantiles of a plane's values at `probabilities` (non-decreasing, in [0, 1]).
 pub fn quantiles_at(plane: &Array2<f64>, probabilities: &[f64]) -> Vec<f64> {
     let stride = sample_step(plane.len(), plane.ncols());
-    let mut sample: Vec<f64> = plane
-        .iter()
-        .step_by(stride)
-        .copied()
-        .filter(|v| v.is_finite())
-        .collect();
+    sample_quantiles(plane.iter().step_by(stride).copied(), probabilities)
+}
+
+/// The quantiles at `probabilities` of the finite values of `sample` (sorted here).
+pub(crate) fn sample_quantiles(
+    sample: impl Iterator<Item = f64>,
+    probabilities: &[f64],
+) -> Vec<f64> {
+    let mut sample: Vec<f64> = sample.filter(|v| v.is_finite()).collect();
     if sample.is_empty() {
         return vec![0.0; probabilities.len()];
     }

@@ -259,7 +259,9 @@ fn quilt_patches(
     let patch = patch_side(sr, sc);
     let overlap = (patch / OVERLAP_DIVISOR).max(1);
     let sigma = patch as f64 / 2.0;
-    let source = &high_pass(source, sigma, false);
+    // The source is small: blurred at full resolution, so the patches chosen do not depend
+    // on the decimation of wide blurs.
+    let source = &less_blurred(source, &dft_blur(source, sigma, false));
     let guide = Guide::new(source, companions, matched);
     let (lr, lc) = (
         Layout::new(rows, patch.min(sr), overlap),
@@ -369,9 +371,85 @@ fn quilt_patches(
 /// `field` minus its Gaussian blur of standard deviation `sigma` samples (edges repeated, or
 /// wrapped around for a torus), at the field's mean level: the detail finer than about `sigma`.
 fn high_pass(field: &Array2<f64>, sigma: f64, wrap: bool) -> Array2<f64> {
-    let detail = field - &gaussian_blur(field, sigma, wrap);
+    less_blurred(field, &gaussian_blur(field, sigma, wrap))
+}
+
+/// `field - blurred`, lifted to the field's mean level.
+fn less_blurred(field: &Array2<f64>, blurred: &Array2<f64>) -> Array2<f64> {
+    let detail = field - blurred;
     let lift = field.mean().unwrap_or(0.0) - detail.mean().unwrap_or(0.0);
     detail + lift
+}
+
+/// The smallest Gaussian, in samples of the decimated field, that [`gaussian_blur`] applies on
+/// a decimated field: the blur is then smooth over four samples, and the cubic return to full
+/// resolution misses by a fraction of a percent of the detail.
+const DECIMATED_SIGMA: f64 = 4.0;
+
+/// `field` blurred by a Gaussian of standard deviation `sigma` samples (edges repeated, or
+/// wrapped around for a torus). A wide blur (`sigma` of at least twice [`DECIMATED_SIGMA`])
+/// is done on the field averaged over `f` x `f` blocks, `f = floor(sigma / 4)` (the edge
+/// samples repeated over 3 sigma first), and brought back by cubic interpolation
+/// (Catmull-Rom), the decimated Gaussian narrowed by the box's variance `(f^2 - 1) / 12`: a
+/// 1024^2 blur of sigma 32 then costs an FFT of about 152^2 instead of 1216^2. On a torus
+/// whose sides `f` does not divide, and for narrower blurs, the blur is done at full
+/// resolution.
+fn gaussian_blur(field: &Array2<f64>, sigma: f64, wrap: bool) -> Array2<f64> {
+    let (h, w) = field.dim();
+    let f = (sigma / DECIMATED_SIGMA).floor() as usize;
+    if f < 2 || h < 2 * f || w < 2 * f || (wrap && (h % f != 0 || w % f != 0)) {
+        return dft_blur(field, sigma, wrap);
+    }
+    // Per axis: samples before the field, and blocks on the (padded) torus.
+    let pad = if wrap {
+        0
+    } else {
+        (3.0 * sigma / f as f64).ceil() as usize * f
+    };
+    let blocks_along = |n: usize| (n + 2 * pad).div_ceil(f);
+    let (bh, bw) = (blocks_along(h), blocks_along(w));
+    let source = |q: usize, n: usize| {
+        let q = q as isize - pad as isize;
+        if wrap {
+            q.rem_euclid(n as isize) as usize
+        } else {
+            q.clamp(0, n as isize - 1) as usize
+        }
+    };
+    let blocks = Array2::from_shape_fn((bh, bw), |(i, j)| {
+        let mut sum = 0.0;
+        for y in i * f..(i + 1) * f {
+            for x in j * f..(j + 1) * f {
+                sum += field[(source(y, h), source(x, w))];
+            }
+        }
+        sum / (f * f) as f64
+    });
+    let ff = f as f64;
+    let narrowed = (sigma * sigma - (ff * ff - 1.0) / 12.0).max(0.0).sqrt() / ff;
+    let coarse = dft_blur(&blocks, narrowed, true);
+    // Catmull-Rom taps from the block centres ((i + 1/2) f - 1/2 samples into the padding).
+    let taps = |n: usize, blocks: usize| -> crate::decompose::pyramid::Taps {
+        (0..n)
+            .map(|p| {
+                let u = ((p + pad) as f64 + 0.5) / ff - 0.5;
+                let (i, t) = (u.floor() as isize, u - u.floor());
+                let weights = [
+                    (-t * t * t + 2.0 * t * t - t) / 2.0,
+                    (3.0 * t * t * t - 5.0 * t * t + 2.0) / 2.0,
+                    (-3.0 * t * t * t + 4.0 * t * t + t) / 2.0,
+                    (t * t * t - t * t) / 2.0,
+                ];
+                (0..4)
+                    .map(|k| {
+                        let q = (i + k as isize - 1).rem_euclid(blocks as isize) as usize;
+                        (q, weights[k])
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    crate::decompose::pyramid::apply_separable(&coarse, &taps(h, bh), &taps(w, bw))
 }
 
 /// `field` blurred by a Gaussian of standard deviation `sigma` samples, by the DFT (the
@@ -379,7 +457,7 @@ fn high_pass(field: &Array2<f64>, sigma: f64, wrap: bool) -> Array2<f64> {
 /// narrow one): on the torus when `wrap`, else with the edge samples repeated (the field
 /// padded by 3 sigma on every side, beyond which the kernel holds 0.3 % of its weight). In
 /// single precision, around the field's mean.
-fn gaussian_blur(field: &Array2<f64>, sigma: f64, wrap: bool) -> Array2<f64> {
+fn dft_blur(field: &Array2<f64>, sigma: f64, wrap: bool) -> Array2<f64> {
     let (h, w) = field.dim();
     if h == 0 || w == 0 {
         return field.clone();
@@ -955,10 +1033,13 @@ mod tests {
 
     #[test]
     fn the_blur_by_the_dft_matches_the_blur_in_space() {
-        // A relief on a large offset (heights in arbitrary units), edges repeated or wrapped.
+        // A relief on a large offset (heights in arbitrary units), edges repeated or wrapped;
+        // sigma 17 and up are blurred decimated (on the torus only 40, whose blocks of 10
+        // divide both sides). Measured worst: 0.6 % of the detail's deviation at full
+        // resolution, 0.5 % decimated.
         let field = ridges(70, 90, 6) + 1000.0;
         for wrap in [false, true] {
-            for sigma in [1.5, 6.0, 14.0] {
+            for sigma in [1.5, 6.0, 14.0, 17.0, 26.0, 40.0] {
                 let (fast, twin) = (
                     gaussian_blur(&field, sigma, wrap),
                     blur_in_space(&field, sigma, wrap),
