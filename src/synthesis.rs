@@ -310,8 +310,7 @@ impl MaterialModel {
             Border::Mirror
         };
         // The exemplar's quilt does not depend on the bands: laid while they are drawn.
-        let lays_exemplar = self.exemplar().is_some() && s.kl.space == ColourSpace::Lab;
-        let (bands, _) = rayon::join(
+        let (bands, laid) = rayon::join(
             || {
                 s.levels.visit(SynthesizeBands {
                     shapes: &shapes,
@@ -319,7 +318,11 @@ impl MaterialModel {
                     noise,
                 })
             },
-            || lays_exemplar && structure.get_or_init(|| self.exemplar_details(o)).is_some(),
+            || {
+                (s.kl.space == ColourSpace::Lab)
+                    .then(|| structure.get_or_init(|| self.exemplar_details(o)).as_ref())
+                    .flatten()
+            },
         );
         let (band_probabilities, factor_probabilities) = (
             marginals::band_probabilities(),
@@ -351,8 +354,7 @@ impl MaterialModel {
             ]
         });
         if let Some(e) = self.exemplar()
-            && s.kl.space == ColourSpace::Lab
-            && let Some(laid) = structure.get_or_init(|| self.exemplar_details(o)).as_ref()
+            && let Some(laid) = laid
         {
             // The MRF's L* (and a*, b* where the exemplar stores chroma) keeps what is coarser
             // than the exemplar's patches; this subspace's laid crop (its weights on the laid
@@ -772,9 +774,9 @@ fn cropped(field: Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
 const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
 /// `guide` quilted for the output of `o` (on [`quilt_torus`]) with the exemplar's basis crops
 /// laid by the same patches ([`quilt_laid`]): the guide's quilt on the torus, not yet
-/// integrated, and the crops with their placement on the output; with a phase, every patch keeps the
-/// lattice's phase. The mean crop's colour (its a* and b*, and its L* when the guide is not
-/// itself a lightness) helps the guide choose the patches and cuts, so fewer cuts join two
+/// integrated, and the crops with their placement on the output; with a phase, every patch
+/// keeps the lattice's phase. The mean crop's colour (its a* and b*, and its L* when the guide
+/// is not itself a lightness) helps the guide choose the patches and cuts, so fewer cuts join two
 /// colours on one flat surface.
 fn laid_exemplar(
     guide: &Array2<f64>,
