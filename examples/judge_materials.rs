@@ -9,8 +9,9 @@
 //!
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
 //! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--verbose]
-//! [--sheet DIR] [--seed N] [--pair-rank K] [--shadows attached|cast|auto]`; `--shadows` sets
-//! the range map's shadows (default: attached; auto: analysis chooses); `--seed` sets the synthesis seed (default 1;
+//! [--sheet DIR] [--seed N] [--pair-rank K] [--shadows attached|cast|auto]
+//! [--coarse laid|mrf|auto]`; `--shadows` sets the range map's shadows and `--coarse` where
+//! the exemplar's coarse variation comes from (default for both: auto, analysis chooses); `--seed` sets the synthesis seed (default 1;
 //! one seed's figures move by about 0.1-0.3 crop levels from seed to seed); `--pair-rank K` is
 //! an experiment: every judged image gets the L* table of its own light rebuilt from the mean
 //! and K principal components (8-bit coefficients) of the tables of all frontal lights, as
@@ -29,7 +30,7 @@ use btfmrf::decompose::ColourSpace;
 use btfmrf::eval::Yardstick;
 use btfmrf::eval::montage::montage;
 use btfmrf::geometry::relight::Shadows;
-use btfmrf::model::ModelKind;
+use btfmrf::model::{CoarseSource, ModelKind};
 use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
 use ndarray::{Array3, s};
@@ -178,6 +179,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     }
                 }
             }
+            "--coarse" => {
+                options.coarse = match args.next().ok_or("--coarse laid|mrf|auto")?.as_str() {
+                    "laid" => Some(CoarseSource::Laid),
+                    "mrf" => Some(CoarseSource::Mrf),
+                    "auto" => None,
+                    other => return Err(format!("--coarse {other}: laid, mrf or auto").into()),
+                }
+            }
             "--verbose" => verbose = true,
             "--seed" => seed = args.next().ok_or("--seed N")?.parse()?,
             "--pair-rank" => rank = Some(args.next().ok_or("--pair-rank K")?.parse()?),
@@ -288,9 +297,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let n = LIGHTS.len() as f64;
         use btfmrf::model::format;
         println!(
-            "{material} {kind} ({} bytes: exemplar {}, colour tables {}, lit tables {}, periodic {}, range map {}, {:?} shadows): x{:.2} the crop level (geometric mean), {:.2} Lab",
+            "{material} {kind} ({} bytes: exemplar {} with {:?} coarse variation, colour tables {}, lit tables {}, periodic {}, range map {}, {:?} shadows): x{:.2} the crop level (geometric mean), {:.2} Lab",
             format::to_bytes(&model).len(),
             format::exemplar_bytes(&model),
+            model.exemplar().map(|e| e.coarse),
             format::colour_marginal_bytes(&model),
             format::lit_marginal_bytes(&model),
             format::periodic_bytes(&model),

@@ -24,7 +24,9 @@ use crate::geometry::{
     Phase, Placement, QuiltedRelief, detail_scale, patch_side, quilt, quilt_laid,
     resample_periodic, split_detail,
 };
-use crate::model::{Exemplar, LitMarginals, MaterialModel, ModelError, PeriodicPart, Result};
+use crate::model::{
+    CoarseSource, Exemplar, LitMarginals, MaterialModel, ModelError, PeriodicPart, Result,
+};
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
 
@@ -356,23 +358,31 @@ impl MaterialModel {
         if let Some(e) = self.exemplar()
             && let Some(laid) = laid
         {
-            // The MRF's L* (and a*, b* where the exemplar stores chroma) keeps what is coarser
-            // than the exemplar's patches; this subspace's laid crop (its weights on the laid
-            // basis) brings the structure finer.
-            let sigma = detail_scale(e.rows, e.cols);
-            // The plane's coarse part plus the laid crop's detail is the laid crop plus the
-            // coarse part of their difference (the split is linear): one blur, not two.
-            let with_detail = |plane: &Array2<f64>, laid: Array2<f64>| {
-                let (coarse, _) = split_detail(&(plane - &laid), sigma, o.tileable);
-                laid + coarse
+            // This subspace's laid crop (its weights on the laid basis) brings the structure
+            // finer than the exemplar's patches to L* (and a*, b* where the exemplar stores
+            // chroma); the coarser L* is the MRF's or the laid crop's own, the coarser chroma
+            // the MRF's (see `CoarseSource`).
+            let with_detail = |plane: &Array2<f64>, laid: Array2<f64>, coarse| {
+                let offset = plane - &laid;
+                match coarse {
+                    // The plane's coarse part plus the laid crop's detail is the laid crop plus
+                    // the coarse part of their difference (the split is linear): one blur.
+                    CoarseSource::Mrf => {
+                        let sigma = detail_scale(e.rows, e.cols);
+                        laid + split_detail(&offset, sigma, o.tileable).0
+                    }
+                    CoarseSource::Laid => laid + offset.mean().unwrap_or(0.0),
+                }
             };
             if let Some(coefficients) = e.lightness.coefficients(k) {
-                colours[0] = with_detail(&colours[0], laid.lightness(&coefficients));
+                let laid = laid.lightness(&coefficients);
+                colours[0] = with_detail(&colours[0], laid, e.coarse);
             }
             if let Some(coefficients) = e.chroma.as_ref().and_then(|c| c.fields.coefficients(k)) {
                 for channel in 0..2 {
                     let detail = laid.chroma(&coefficients, channel);
-                    colours[1 + channel] = with_detail(&colours[1 + channel], detail);
+                    let plane = &colours[1 + channel];
+                    colours[1 + channel] = with_detail(plane, detail, CoarseSource::Mrf);
                 }
             }
         }

@@ -10,7 +10,7 @@ use btfmrf::analysis::{AnalysisOptions, analyze};
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction};
 use btfmrf::eval::{Levels, Verdict, Yardstick};
-use btfmrf::model::ModelKind;
+use btfmrf::model::{CoarseSource, Exemplar, MaterialModel, ModelKind};
 use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
 use ndarray::{Array3, s};
@@ -344,4 +344,49 @@ fn every_model_on_every_photograph_is_judged() {
             assert!(f.judgement.structure.is_finite());
         }
     }
+}
+
+/// Issue 11: on the built-in leather the MRF's L* variation coarser than the exemplar's
+/// patches drew blotches the measured leather lacks (nine frontal lights, seeds 1-4: x1.44 the
+/// another-crop level, x1.26 with the laid crops' own coarse L*). Analysis judges the
+/// choice at seed 1; the judge must agree at other seeds and lights (measured when written:
+/// the laid crops' structure distance x0.938 the MRF's, geometric mean of eight).
+#[test]
+fn the_leather_takes_its_coarse_variation_from_the_laid_crops() {
+    let btf = Btf::synthetic(SyntheticMaterial::Leather, 128, 5).unwrap();
+    let (model, _) = analyze(&btf, &AnalysisOptions::default(), &NoProgress).unwrap();
+    let exemplar = model
+        .exemplar()
+        .expect("the leather keeps an exemplar")
+        .clone();
+    assert_eq!(exemplar.coarse, CoarseSource::Laid);
+    let mut parts = model.clone().into_parts();
+    parts.exemplar = Some(Exemplar {
+        coarse: CoarseSource::Mrf,
+        ..exemplar
+    });
+    let mrf = MaterialModel::new(parts).unwrap();
+    let view = Direction::new(0.0, 0.0);
+    let mut log_ratios = Vec::new();
+    for (theta, phi) in [(30.0, 90.0), (45.0, 160.0), (60.0, 90.0), (75.0, 45.0)] {
+        let light = Direction::new(theta, phi);
+        let l = btf.lights().find(&light, 0.5).unwrap();
+        let y = Yardstick::new(&btf.image(0, l).unwrap(), None, 1).unwrap();
+        for seed in [2, 3] {
+            let o = SynthesisOptions {
+                rows: 128,
+                cols: 128,
+                seed,
+                tileable: false,
+            };
+            let structure = |m: &MaterialModel| {
+                let image = m.synthesize_image(&view, &light, &o).unwrap();
+                y.judge(&image).unwrap().judgement.structure
+            };
+            log_ratios.push((structure(&model) / structure(&mrf)).ln());
+        }
+    }
+    let ratio = (log_ratios.iter().sum::<f64>() / log_ratios.len() as f64).exp();
+    println!("leather, laid over MRF coarse variation: structure x{ratio:.3} (geometric mean)");
+    assert!(ratio < 1.0, "{ratio}");
 }

@@ -4,9 +4,9 @@
 use std::path::Path;
 
 use super::material::{
-    BandMarginals, DeviationCodes, Exemplar, ExemplarChroma, LitMarginals, MAX_CHROMA_STEP,
-    MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
-    PeriodicPart, Principal, RangeMap, SubspaceModel,
+    BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LitMarginals,
+    MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES,
+    MaterialModel, MaterialParts, PeriodicPart, Principal, RangeMap, SubspaceModel,
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
@@ -25,9 +25,10 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// marginals: linear RGB KL), version 2 files (no joint colour tables) and version 3 files (no
 /// periodic part), version 4 files (one exemplar crop with a gain per subspace), version 5
 /// files (no exemplar chroma), version 6 files (no chroma-lightness coupling), version 7
-/// files (no lit lightness tables), version 8 files (exemplar L* deviations always 8-bit) and
-/// version 9 files (no cast shadows) are still read.
-pub const VERSION: u16 = 10;
+/// files (no lit lightness tables), version 8 files (exemplar L* deviations always 8-bit),
+/// version 9 files (no cast shadows) and version 10 files (an exemplar's coarse variation
+/// always the MRF's) are still read.
+pub const VERSION: u16 = 11;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -314,6 +315,11 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
             // Version 9: the code width of the L* deviations.
             let deviations = Storage::of(e.deviation_codes);
             w.u8(deviations.bits());
+            // Version 11: where the coarse variation comes from.
+            w.u8(match e.coarse {
+                CoarseSource::Mrf => 0,
+                CoarseSource::Laid => 1,
+            });
             write_principal(w, &e.lightness, (Storage::Byte, deviations));
             if let Some(c) = &e.chroma {
                 w.u8(c.step as u8);
@@ -395,7 +401,7 @@ pub fn exemplar_bytes(model: &MaterialModel) -> usize {
             1 + principal_bytes(&c.fields, (Storage::Byte, Storage::Byte))
         });
         let lightness = (Storage::Byte, Storage::of(e.deviation_codes));
-        5 + principal_bytes(&e.lightness, lightness) + chroma
+        6 + principal_bytes(&e.lightness, lightness) + chroma
     })
 }
 
@@ -939,6 +945,11 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
             } else {
                 DeviationCodes::Byte
             };
+            let coarse = match (version >= 11).then(|| r.u8()).transpose()? {
+                None | Some(0) => CoarseSource::Mrf,
+                Some(1) => CoarseSource::Laid,
+                Some(c) => return Err(format!("exemplar coarse source {c} (0 or 1)")),
+            };
             let lightness = if version >= 5 {
                 read_principal(
                     r,
@@ -988,6 +999,7 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
                 lightness,
                 deviation_codes,
                 chroma,
+                coarse,
             }))
         }
         f => Err(format!("unknown exemplar flag {f}")),
@@ -1209,6 +1221,27 @@ mod tests {
         assert!(e.contains("unused half"), "{e}");
         // Too few bytes for the codes: an error before anything is read.
         assert!(read_quantised(&mut Reader::new(&bytes[..11]), 7, Storage::Nibble, "v").is_err());
+    }
+
+    #[test]
+    fn an_exemplar_names_its_coarse_source_from_version_11() {
+        // Flag 1, a 1 x 1 crop, 8-bit deviations, [coarse source,] no deviations, the mean.
+        let record = |coarse: Option<u8>| {
+            let mut w = Writer(vec![1, 1, 0, 1, 0, 8]);
+            w.0.extend(coarse);
+            w.u8(0);
+            w.f32(40.0);
+            w.f32(1.0);
+            w.u8(10);
+            w.0
+        };
+        let read = |bytes: &[u8], version| read_exemplar(&mut Reader::new(bytes), 1, version);
+        let coarse = |bytes: &[u8], version| read(bytes, version).unwrap().unwrap().coarse;
+        assert_eq!(coarse(&record(None), 10), CoarseSource::Mrf);
+        assert_eq!(coarse(&record(Some(0)), 11), CoarseSource::Mrf);
+        assert_eq!(coarse(&record(Some(1)), 11), CoarseSource::Laid);
+        let e = read(&record(Some(2)), 11).unwrap_err();
+        assert!(e.contains("coarse source 2"), "{e}");
     }
 
     #[test]

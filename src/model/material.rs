@@ -284,8 +284,9 @@ pub const MAX_EXEMPLAR_COMPONENTS: usize = 8;
 /// carry it): the CIE L* of the same crop of every subspace image, at the measured pixel
 /// scale, stored as their mean and a few principal deviations. At synthesis the crops are
 /// quilted ([`crate::geometry::quilt`]) to the output size, every one with the same patches,
-/// and subspace `k`'s detail finer than a patch replaces the MRF's in its L*; the MRF keeps
-/// the coarser variation, so the result repeats on no grid. One layout for all subspaces keeps
+/// and subspace `k`'s detail finer than a patch replaces the MRF's in its L*; the variation
+/// coarser than a patch comes from where [`CoarseSource`] says, and the quilt repeats on no
+/// grid either way. One layout for all subspaces keeps
 /// the structure the same surface under every light, and each subspace keeps its own detail
 /// (the shading of a relief, its shadows and highlights, differ from light to light).
 #[derive(Debug, Clone, PartialEq)]
@@ -301,6 +302,26 @@ pub struct Exemplar {
     pub deviation_codes: DeviationCodes,
     /// The crops' chroma at a coarser sampling, if stored (format version 6).
     pub chroma: Option<ExemplarChroma>,
+    /// Where the synthesis takes the L* variation coarser than a patch from (format version
+    /// 11; older files: the MRF).
+    pub coarse: CoarseSource,
+}
+
+/// Where a synthesis with an exemplar takes the L* variation coarser than the exemplar's
+/// patches (the Gaussian split at [`crate::geometry::detail_scale`]; the coarser chroma is
+/// always the MRF's). Analysis chooses ([`crate::analysis::AnalysisOptions::coarse`]); on
+/// the built-in leather the MRF's coarse L* drew blotches the measured leather lacks (nine
+/// frontal lights, seeds 1-4: x1.44 / 1.31 / 1.39 / 1.62 the another-crop level with it,
+/// x1.20 / 1.30 / 1.29 / 1.27 without). The laid crops' coarse chroma as well put colour
+/// steps at the quilt's cuts through the built-in stones (a* fine share up to a quarter
+/// further from the measured at 128^2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CoarseSource {
+    /// The MRF's bands: the laid crops bring only the detail finer than a patch.
+    Mrf,
+    /// The laid crops' own L*, shifted to the MRF plane's mean.
+    Laid,
 }
 
 /// Code width of an exemplar's stored L* deviations. The file keeps the values as quantised,
@@ -913,6 +934,7 @@ mod tests {
                 },
                 deviation_codes: DeviationCodes::Byte,
                 chroma: None,
+                coarse: CoarseSource::Mrf,
             })
         });
         assert!(e.contains("1 weight rows for 2 subspaces"), "{e}");
@@ -926,6 +948,7 @@ mod tests {
             },
             deviation_codes: DeviationCodes::Byte,
             chroma: None,
+            coarse: CoarseSource::Laid,
         };
         let model = MaterialModel::new(MaterialParts {
             exemplar: Some(exemplar.clone()),

@@ -7,7 +7,7 @@ use btfmrf::analysis::{AnalysisOptions, AnalysisRepair, analyze};
 use btfmrf::btf::Btf;
 use btfmrf::geometry::relight::Shadows;
 use btfmrf::memory;
-use btfmrf::model::{ModelKind, format};
+use btfmrf::model::{CoarseSource, ModelKind, format};
 
 use super::{Bar, Global, emit, emit_json, human_bytes};
 
@@ -28,6 +28,9 @@ struct AnalyzeReport<'a> {
     colour_marginal_bytes: usize,
     lit_marginal_bytes: usize,
     exemplar_bytes: usize,
+    /// Where the exemplar's synthesis takes the variation coarser than its patches ("mrf" or
+    /// "laid"); `None` without an exemplar.
+    exemplar_coarse: Option<CoarseSource>,
     /// Periods (rows, columns; measured pixels) of the lattice found, if any.
     lattice: Option<[f64; 2]>,
     periodic_bytes: usize,
@@ -50,6 +53,14 @@ enum ShadowChoice {
     Auto,
     Attached,
     Cast,
+}
+
+/// `--coarse`: where the exemplar's coarse variation comes from, or let analysis choose.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum CoarseChoice {
+    Auto,
+    Laid,
+    Mrf,
 }
 
 /// Fit the probabilistic BTF model of Haindl and Filip: cluster the view x light space into
@@ -122,8 +133,10 @@ pub struct Args {
     /// every subspace image, stored as their mean (a byte a pixel) and up to six principal
     /// deviations (4 bits a pixel), quilted at synthesis with one layout to carry each subspace image's
     /// structure finer than a third of the crop, which second-order MRF models lose (cells,
-    /// grains, stones, the shadows of a relief under each light); the MRF keeps the coarser
-    /// variation. The crops' a* and b* are stored too, averaged over 2 x 2 pixels (4 x 4 for
+    /// grains, stones, the shadows of a relief under each light). The coarser variation comes
+    /// from the MRF or from the laid crops themselves, whichever the judge finds closer to
+    /// the measured images at up to eight subspace images (the MRF's coarse part drew blotches
+    /// on the built-in leather; --json names the choice). The crops' a* and b* are stored too, averaged over 2 x 2 pixels (4 x 4 for
     /// a 256 crop; 8 KiB), and laid with the same patches, so each stone or thread keeps its
     /// own colour. Default: 256 for a photograph (one subspace image, one crop of 64 KiB),
     /// 128 for several subspace images (the mean, 16 KiB, and up to six deviations, 8 KiB
@@ -161,6 +174,18 @@ pub struct Args {
     /// directions.
     #[arg(long, value_enum, default_value_t = ShadowChoice::Auto)]
     shadows: ShadowChoice,
+    /// Where the structure exemplar's synthesis takes the L* variation coarser than its quilt
+    /// patches (half a patch and up; the coarser chroma is always the MRF's): `laid` (the
+    /// laid crops themselves, moved to the MRF's mean), `mrf` (the MRF's bands; every model
+    /// before format version 11) or `auto` (the default: mrf, unless beside a range map on
+    /// images of at least 64 pixels a side the judge finds the laid crops' at most 0.95 of
+    /// the MRF's distance to the measured images at up to eight subspace images: one more
+    /// synthesis of each, about a second more for a 128^2 built-in material, the leather
+    /// 6.4 -> 7.4 s). Measured over seeds 1-4, nine frontal lights: the built-in leather's
+    /// MRF drew blotches (x1.44 the another-crop level, laid x1.26; auto chooses laid); the
+    /// stones, sponge and knit moved by at most 0.04 a seed either way (auto keeps mrf).
+    #[arg(long, value_enum, default_value_t = CoarseChoice::Auto)]
+    coarse: CoarseChoice,
     /// Largest model file in bytes (0: no limit). A model above it drops its exemplar's
     /// principal deviations, the last first (8 KiB each at a 128 x 128 crop), until it fits,
     /// and says so; of the built-in materials at 20 clusters, the leather's 3D CAR model
@@ -169,7 +194,7 @@ pub struct Args {
     max_bytes: usize,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
     /// clusters, levels, band_marginal_bytes, colour_marginal_bytes, lit_marginal_bytes,
-    /// exemplar_bytes, lattice, periodic_bytes, repairs, warnings.
+    /// exemplar_bytes, exemplar_coarse, lattice, periodic_bytes, repairs, warnings.
     #[arg(long)]
     json: bool,
 }
@@ -216,6 +241,11 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             ShadowChoice::Attached => Some(Shadows::Attached),
             ShadowChoice::Cast => Some(Shadows::Cast),
         },
+        coarse: match args.coarse {
+            CoarseChoice::Auto => None,
+            CoarseChoice::Laid => Some(CoarseSource::Laid),
+            CoarseChoice::Mrf => Some(CoarseSource::Mrf),
+        },
         ..AnalysisOptions::default()
     };
     let (model, report) = analyze(&btf, &options, &Bar::new(global))?;
@@ -245,6 +275,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             colour_marginal_bytes: format::colour_marginal_bytes(&model),
             lit_marginal_bytes: format::lit_marginal_bytes(&model),
             exemplar_bytes: format::exemplar_bytes(&model),
+            exemplar_coarse: model.exemplar().map(|e| e.coarse),
             lattice: model.periodic().map(|p| [p.lattice.rows, p.lattice.cols]),
             periodic_bytes: format::periodic_bytes(&model),
             repairs: &report.repairs,

@@ -70,6 +70,7 @@ fn a_photograph_is_analysed_and_enlarged_end_to_end() {
     ]))
     .unwrap();
     assert_eq!(json["exemplar_bytes"], 0);
+    assert_eq!(json["exemplar_coarse"], serde_json::Value::Null);
     // One light: no relief to estimate, and nothing repaired to report.
     assert_eq!(json["repairs"], serde_json::json!([]), "{json}");
     enlarge(&model, &big);
