@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use btfmrf::btf::{Btf, DirectionSet};
+use btfmrf::model::{CoarseSource, MaterialModel, format};
 use btfmrf::source::{AnyModel, ModelFile};
 
 use super::{Global, emit, emit_json, human_bytes};
@@ -12,7 +13,8 @@ use super::{Global, emit, emit_json, human_bytes};
 ///
 /// Accepts a UBO2003 zip or folder, an RTI folder or zip (with a .lp file) or a .lp file; a
 /// model file (.btfm or .lpca, told by its first bytes) is described too: its kind, size and
-/// measured directions.
+/// measured directions, and for a .btfm the optional parts it holds (exemplar, range map,
+/// lattice, tables) with what each stores.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The BTF: FILE.zip, a folder, or an RTI .lp file; or a model file.
@@ -90,6 +92,96 @@ struct ModelInfo<'a> {
     lights: usize,
     view_directions: Vec<Angles>,
     light_directions: Vec<Angles>,
+    /// The optional parts of an MRF model (empty for PCA).
+    parts: Vec<ModelPart>,
+}
+
+/// One optional part of an MRF model file.
+#[derive(serde::Serialize)]
+struct ModelPart {
+    /// "exemplar", "range map", "lattice", "colour tables", "lit tables" or "band tables".
+    part: &'static str,
+    /// Its bytes in the payload before deflate; `None` where the format gives no count.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    bytes: Option<usize>,
+    /// What it holds, in words.
+    holds: String,
+}
+
+/// The optional parts `m` holds, in file order where the format counts their bytes.
+fn model_parts(m: &MaterialModel) -> Vec<ModelPart> {
+    let mut parts = Vec::new();
+    let mut add = |part, bytes: usize, holds: String| {
+        if bytes > 0 {
+            parts.push(ModelPart {
+                part,
+                bytes: Some(bytes),
+                holds,
+            });
+        }
+    };
+    let clusters = m.subspaces().len();
+    add(
+        "band tables",
+        format::band_marginal_bytes(m),
+        format!("quantiles of every band of {clusters} subspace images"),
+    );
+    add(
+        "colour tables",
+        format::colour_marginal_bytes(m),
+        format!("joint colour marginals of {clusters} subspace images"),
+    );
+    add(
+        "lit tables",
+        format::lit_marginal_bytes(m),
+        format!("relit L* quantiles of {clusters} subspace images"),
+    );
+    if let Some(e) = m.exemplar() {
+        let coarse = match e.coarse {
+            CoarseSource::Mrf => "the MRF",
+            CoarseSource::Laid => "the laid crops",
+        };
+        let chroma = e.chroma.as_ref().map_or(String::new(), |c| {
+            format!(", chroma in {} x {} blocks", c.step, c.step)
+        });
+        add(
+            "exemplar",
+            format::exemplar_bytes(m),
+            format!(
+                "{} x {} L* crops (mean and {} deviations){chroma}; coarse L* from {coarse}",
+                e.cols,
+                e.rows,
+                e.lightness.basis.len().saturating_sub(1)
+            ),
+        );
+    }
+    if let Some(p) = m.periodic() {
+        add(
+            "lattice",
+            format::periodic_bytes(m),
+            format!(
+                "mean period of {:.1} x {:.1} pixels in {} x {} samples",
+                p.lattice.cols, p.lattice.rows, p.cols, p.rows
+            ),
+        );
+    }
+    if let Some(r) = m.range_map() {
+        parts.push(ModelPart {
+            part: "range map",
+            bytes: None,
+            holds: format!(
+                "{} x {} heights, {}; {} shadows",
+                r.cols,
+                r.rows,
+                match r.step {
+                    1 => "one a pixel".to_string(),
+                    step => format!("one every {step} pixels"),
+                },
+                format!("{:?}", r.shadows).to_lowercase()
+            ),
+        });
+    }
+    parts
 }
 
 fn describe_model(path: &std::path::Path, json: bool) -> anyhow::Result<()> {
@@ -108,6 +200,7 @@ fn describe_model(path: &std::path::Path, json: bool) -> anyhow::Result<()> {
             lights: m.lights().len(),
             view_directions: angles(m.views()),
             light_directions: angles(m.lights()),
+            parts: model_parts(m),
         },
         AnyModel::Lpca(m) => ModelInfo {
             path,
@@ -122,6 +215,7 @@ fn describe_model(path: &std::path::Path, json: bool) -> anyhow::Result<()> {
             lights: m.lights().len(),
             view_directions: angles(m.views()),
             light_directions: angles(m.lights()),
+            parts: Vec::new(),
         },
     };
     if json {
@@ -143,7 +237,17 @@ fn describe_model(path: &std::path::Path, json: bool) -> anyhow::Result<()> {
     emit(format!(
         "  measured tile: {} x {} pixels",
         info.width, info.height
-    ))
+    ))?;
+    if !info.parts.is_empty() {
+        emit("  parts (sizes before the file's deflate):")?;
+    }
+    for p in &info.parts {
+        let bytes = p
+            .bytes
+            .map_or(String::new(), |b| format!(" ({})", human_bytes(b as u64)));
+        emit(format!("    {}{bytes}: {}", p.part, p.holds))?;
+    }
+    Ok(())
 }
 
 pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {

@@ -383,4 +383,38 @@ fn info_describes_a_model_file() {
         text.contains("2dcar model (.btfm)") && text.contains("lights: 81"),
         "{text}"
     );
+    // The optional parts, each with what it holds; the leather's exemplar takes its coarse
+    // L* from the laid crops (analysis chose it, models/README.md).
+    let parts = |info: &serde_json::Value| -> Vec<String> {
+        info["parts"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["part"].as_str().unwrap().to_string())
+            .collect()
+    };
+    assert_eq!(
+        parts(&info),
+        ["colour tables", "lit tables", "exemplar", "range map"],
+        "{info}"
+    );
+    let leather = repo().join("models/leather.btfm");
+    let info: serde_json::Value =
+        serde_json::from_str(&ok(&["info", s(&leather), "--json"])).unwrap();
+    let exemplar = &info["parts"][2];
+    assert!(
+        exemplar["holds"]
+            .as_str()
+            .is_some_and(|h| h.contains("coarse L* from the laid crops")),
+        "{info}"
+    );
+    assert!(
+        exemplar["bytes"].as_u64().is_some_and(|b| b > 1000),
+        "{info}"
+    );
+    let knit = ok(&["info", s(&repo().join("models/knit.btfm"))]);
+    assert!(
+        knit.contains("    lattice (") && knit.contains("coarse L* from the MRF"),
+        "{knit}"
+    );
 }
