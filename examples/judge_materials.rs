@@ -17,7 +17,7 @@
 //! and K principal components (8-bit coefficients) of the tables of all frontal lights, as
 //! per-pair tables stored that way would give it; `--direction-share` weighs the light and view directions in the clustering
 //! (see `AnalysisOptions::direction_share`); `--verbose` adds each light's subspace and its
-//! representative, and the share of the a* and b* variance in neighbour differences (near 0:
+//! representative, and the share of the L*, a* and b* variance in neighbour differences (near 0:
 //! colour constant over regions; 1: white noise), its L* percentiles, and the share of the
 //! chroma steps found off lightness edges.
 
@@ -48,10 +48,10 @@ const LIGHTS: [(f64, f64); 9] = [
     (75.0, 195.0),
 ];
 
-/// Per chroma plane (a*, b*) of `image`, `mean (p[x+1] - p[x])^2 / (2 var)`.
-fn fine_share(image: &Array3<f32>) -> [f64; 2] {
-    let [_, a, b] = ColourSpace::Lab.planes(image);
-    [a, b].map(|p| {
+/// Per CIE plane (L*, a*, b*) of `image`, `mean (p[x+1] - p[x])^2 / (2 var)`: near 0 for a
+/// plane constant over regions, 1 for white noise.
+fn fine_share(image: &Array3<f32>) -> [f64; 3] {
+    ColourSpace::Lab.planes(image).map(|p| {
         let steps = &p.slice(s![.., 1..]) - &p.slice(s![.., ..-1]);
         let var = p.var(0.0).max(1e-12);
         steps.mapv(|d| d * d).mean().unwrap_or(0.0) / (2.0 * var)
@@ -284,7 +284,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     chroma_off_edges(&image)
                 );
                 println!(
-                    "  a*, b* fine share: measured {:.3?}, synthesized {:.3?}",
+                    "  L*, a*, b* fine share: measured {:.3?}, synthesized {:.3?}",
                     fine_share(&measured),
                     fine_share(&image)
                 );
