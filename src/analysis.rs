@@ -521,9 +521,10 @@ pub fn analyze(
 /// [`AnalysisOptions::coarse`]), and beside a range map, with or without it: the candidate
 /// the judge finds closest to the measured images (its structure distance summed over the
 /// `judged` pairs, seed 1, the measured size). Without the exemplar once won on the leather,
-/// whose creases shade differently under every light. The laid crops' coarse L* must come
-/// [`LAID_COARSE_GAIN`] closer than the MRF's. A tie, or an image too small to judge, keeps
-/// the earlier candidate: no exemplar, then the MRF's coarse L*.
+/// whose creases shade differently under every light. Where analysis chooses the source, the
+/// laid crops' coarse L* must come [`LAID_COARSE_GAIN`] closer than the MRF's. A tie, or an
+/// image too small to judge, keeps the earlier candidate: no exemplar, then the MRF's coarse
+/// L*.
 fn judged_exemplar(
     btf: &Btf,
     model: MaterialModel,
@@ -551,13 +552,15 @@ fn judged_exemplar(
     if beside_range_map {
         candidates.push((with(None)?, 1.0));
     }
-    for coarse in sources {
-        let handicap = match coarse {
-            CoarseSource::Mrf => 1.0,
-            CoarseSource::Laid => 1.0 / LAID_COARSE_GAIN,
+    let choosing = sources.len() > 1;
+    for source in sources {
+        // Only a source analysis chooses must earn its place; one asked for is judged as is.
+        let handicap = match source {
+            CoarseSource::Laid if choosing => 1.0 / LAID_COARSE_GAIN,
+            _ => 1.0,
         };
         let exemplar = Exemplar {
-            coarse,
+            coarse: source,
             ..exemplar.clone()
         };
         candidates.push((with(Some(exemplar))?, handicap));
@@ -615,9 +618,10 @@ fn judged_coarse(btf: &Btf) -> bool {
 const LAID_COARSE_GAIN: f64 = 0.95;
 
 /// Subspace representatives at most on which analysis judges the exemplar (whether it helps
-/// beside a range map, and where its coarse variation comes from). Per pair, the two syntheses' distances differ by up to 40 % either way
-/// (the built-in leather), so four pairs could decide on a near tie (0.380 against 0.377) what
-/// nine frontal lights judged clearly (x1.42 against x1.99 the another-crop level).
+/// beside a range map, and where its coarse L* comes from). Per pair, two syntheses'
+/// distances differ by up to 40 % either way (the built-in leather), so four pairs could
+/// decide on a near tie (0.380 against 0.377) what nine frontal lights judged clearly (x1.42
+/// against x1.99 the another-crop level).
 const EXEMPLAR_JUDGED: usize = 8;
 
 /// The default largest model file, bytes: issue 11's "at most 150 KB with every part".

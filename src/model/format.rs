@@ -315,7 +315,7 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
             // Version 9: the code width of the L* deviations.
             let deviations = Storage::of(e.deviation_codes);
             w.u8(deviations.bits());
-            // Version 11: where the coarse variation comes from.
+            // Version 11: where the L* coarser than half a patch comes from.
             w.u8(match e.coarse {
                 CoarseSource::Mrf => 0,
                 CoarseSource::Laid => 1,

@@ -28,7 +28,7 @@ struct AnalyzeReport<'a> {
     colour_marginal_bytes: usize,
     lit_marginal_bytes: usize,
     exemplar_bytes: usize,
-    /// Where the exemplar's synthesis takes the variation coarser than its patches ("mrf" or
+    /// Where the exemplar's synthesis takes the L* coarser than its patches ("mrf" or
     /// "laid"); `None` without an exemplar.
     exemplar_coarse: Option<CoarseSource>,
     /// Periods (rows, columns; measured pixels) of the lattice found, if any.
@@ -133,12 +133,11 @@ pub struct Args {
     /// every subspace image, stored as their mean (a byte a pixel) and up to six principal
     /// deviations (4 bits a pixel), quilted at synthesis with one layout to carry each subspace image's
     /// structure finer than a third of the crop, which second-order MRF models lose (cells,
-    /// grains, stones, the shadows of a relief under each light). The coarser variation comes
-    /// from the MRF or from the laid crops themselves, whichever the judge finds closer to
-    /// the measured images at up to eight subspace images (the MRF's coarse part drew blotches
-    /// on the built-in leather; --json names the choice). The crops' a* and b* are stored too, averaged over 2 x 2 pixels (4 x 4 for
-    /// a 256 crop; 8 KiB), and laid with the same patches, so each stone or thread keeps its
-    /// own colour. Default: 256 for a photograph (one subspace image, one crop of 64 KiB),
+    /// grains, stones, the shadows of a relief under each light). The coarser L* comes from
+    /// the MRF, or from the laid crops themselves where a check finds them clearly closer to
+    /// the measured images (see --coarse). The crops' a* and b* are stored too, averaged over
+    /// 2 x 2 pixels (4 x 4 for a 256 crop; 8 KiB), and laid with the same patches, so each
+    /// stone or thread keeps its own colour. Default: 256 for a photograph (one subspace image, one crop of 64 KiB),
     /// 128 for several subspace images (the mean, 16 KiB, and up to six deviations, 8 KiB
     /// each).
     /// Stored when there is no range map (a photograph), and beside a range map sampled at
