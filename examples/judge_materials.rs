@@ -304,7 +304,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             format::colour_marginal_bytes(&model),
             format::lit_marginal_bytes(&model),
             format::periodic_bytes(&model),
-            model.range_map().map_or(0, |m| 2 * m.rows * m.cols),
+            format::range_map_bytes(&model),
             model.range_map().map(|m| m.shadows),
             (log_ratio / n).exp(),
             colour / n

@@ -135,25 +135,7 @@ pub fn to_payload(model: &MaterialModel) -> Vec<u8> {
     }
     match model.range_map() {
         None => w.u8(0),
-        Some(r) => {
-            // 1: heights alone; 2: and strengths; 3: and cast shadows.
-            w.u8(match (r.strength.is_empty(), r.shadows) {
-                (true, _) => 1,
-                (false, Shadows::Attached) => 2,
-                (false, Shadows::Cast) => 3,
-            });
-            w.u16(r.rows as u16);
-            w.u16(r.cols as u16);
-            w.u16(r.step as u16);
-            let heights: Vec<f64> = r.heights.iter().map(|&h| f64::from(h)).collect();
-            write_quantised(&mut w, &heights, Storage::Single);
-            if !r.strength.is_empty() {
-                w.u16(r.strength.len() as u16);
-                for &k in &r.strength {
-                    w.f32(f64::from(k));
-                }
-            }
-        }
+        Some(r) => write_range_map(&mut w, r),
     }
     write_colour(&mut w, model);
     write_pair_gains(&mut w, model);
@@ -373,6 +355,43 @@ fn principal_bytes(p: &Principal, storage: (Storage, Storage)) -> usize {
         .map(|(j, b)| 8 + if j == 0 { storage.0 } else { storage.1 }.code_bytes(b.len()))
         .sum::<usize>()
         + 4 * p.weights.iter().map(Vec::len).sum::<usize>()
+}
+
+/// The range map: its flag (1: heights alone; 2: and strengths; 3: and cast shadows), size,
+/// step, quantised heights and, with flags 2 and 3, the strengths.
+fn write_range_map(w: &mut Writer, r: &RangeMap) {
+    w.u8(match (r.strength.is_empty(), r.shadows) {
+        (true, _) => 1,
+        (false, Shadows::Attached) => 2,
+        (false, Shadows::Cast) => 3,
+    });
+    w.u16(r.rows as u16);
+    w.u16(r.cols as u16);
+    w.u16(r.step as u16);
+    let heights: Vec<f64> = r.heights.iter().map(|&h| f64::from(h)).collect();
+    write_quantised(w, &heights, Storage::Single);
+    if !r.strength.is_empty() {
+        w.u16(r.strength.len() as u16);
+        for &k in &r.strength {
+            w.f32(f64::from(k));
+        }
+    }
+}
+
+/// Bytes the range map takes in the file, its flag included (1 without one).
+pub fn range_map_bytes(model: &MaterialModel) -> usize {
+    model.range_map().map_or(1, range_map_record_bytes)
+}
+
+/// Bytes [`write_range_map`] writes for `r`: flag, size and step (7), the heights' low and
+/// quantum (8) and codes, and the strengths with their count.
+fn range_map_record_bytes(r: &RangeMap) -> usize {
+    let strengths = if r.strength.is_empty() {
+        0
+    } else {
+        2 + 4 * r.strength.len()
+    };
+    7 + 8 + Storage::Single.code_bytes(r.rows * r.cols) + strengths
 }
 
 /// Bytes the periodic part takes in the file (1 without one).
@@ -1221,6 +1240,23 @@ mod tests {
         assert!(e.contains("unused half"), "{e}");
         // Too few bytes for the codes: an error before anything is read.
         assert!(read_quantised(&mut Reader::new(&bytes[..11]), 7, Storage::Nibble, "v").is_err());
+    }
+
+    #[test]
+    fn the_range_map_takes_the_bytes_counted_for_it() {
+        for (strength, shadows) in [(vec![], Shadows::Attached), (vec![1.0, 0.5], Shadows::Cast)] {
+            let r = RangeMap {
+                heights: (0..12).map(|i| i as f32).collect(),
+                rows: 3,
+                cols: 4,
+                step: 2,
+                strength,
+                shadows,
+            };
+            let mut w = Writer(Vec::new());
+            write_range_map(&mut w, &r);
+            assert_eq!(range_map_record_bytes(&r), w.0.len());
+        }
     }
 
     #[test]

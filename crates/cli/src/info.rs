@@ -101,23 +101,18 @@ struct ModelInfo<'a> {
 struct ModelPart {
     /// "exemplar", "range map", "lattice", "colour tables", "lit tables" or "band tables".
     part: &'static str,
-    /// Its bytes in the payload before deflate; `None` where the format gives no count.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    bytes: Option<usize>,
+    /// Its bytes in the payload before deflate.
+    bytes: usize,
     /// What it holds, in words.
     holds: String,
 }
 
-/// The optional parts `m` holds, in file order where the format counts their bytes.
+/// The optional parts `m` holds.
 fn model_parts(m: &MaterialModel) -> Vec<ModelPart> {
     let mut parts = Vec::new();
     let mut add = |part, bytes: usize, holds: String| {
         if bytes > 0 {
-            parts.push(ModelPart {
-                part,
-                bytes: Some(bytes),
-                holds,
-            });
+            parts.push(ModelPart { part, bytes, holds });
         }
     };
     let clusters = m.subspaces().len();
@@ -166,20 +161,19 @@ fn model_parts(m: &MaterialModel) -> Vec<ModelPart> {
         );
     }
     if let Some(r) = m.range_map() {
-        parts.push(ModelPart {
-            part: "range map",
-            bytes: None,
-            holds: format!(
-                "{} x {} heights, {}; {} shadows",
-                r.cols,
-                r.rows,
-                match r.step {
-                    1 => "one a pixel".to_string(),
-                    step => format!("one every {step} pixels"),
-                },
-                format!("{:?}", r.shadows).to_lowercase()
+        let samples = match r.step {
+            1 => "one a pixel".to_string(),
+            step => format!("one every {step} pixels"),
+        };
+        let shadows = format!("{:?}", r.shadows).to_lowercase();
+        add(
+            "range map",
+            format::range_map_bytes(m),
+            format!(
+                "{} x {} heights, {samples}; {shadows} shadows",
+                r.cols, r.rows
             ),
-        });
+        );
     }
     parts
 }
@@ -242,10 +236,8 @@ fn describe_model(path: &std::path::Path, json: bool) -> anyhow::Result<()> {
         emit("  parts (sizes before the file's deflate):")?;
     }
     for p in &info.parts {
-        let bytes = p
-            .bytes
-            .map_or(String::new(), |b| format!(" ({})", human_bytes(b as u64)));
-        emit(format!("    {}{bytes}: {}", p.part, p.holds))?;
+        let bytes = human_bytes(p.bytes as u64);
+        emit(format!("    {} ({bytes}): {}", p.part, p.holds))?;
     }
     Ok(())
 }
