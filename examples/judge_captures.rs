@@ -7,7 +7,7 @@
 //! and over the another-crop level, and the mean colour distance.
 //!
 //! Run: `cargo run --release --example judge_captures -- CAPTURE... [--clusters N]
-//! [--model KIND] [--no-lit-tables]`, e.g. `../shared/data/rti/*`.
+//! [--model KIND] [--no-lit-tables] [--no-light-tables]`, e.g. `../shared/data/rti/*`.
 
 use btfmrf::analysis::{AnalysisOptions, analyze};
 use btfmrf::btf::Btf;
@@ -30,6 +30,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--clusters" => options.clusters = args.next().ok_or("--clusters N")?.parse()?,
             "--model" => options.kind = args.next().ok_or("--model KIND")?.parse()?,
             "--no-lit-tables" => options.lit_matching = false,
+            "--no-light-tables" => options.light_tables = false,
             path => captures.push(path.to_string()),
         }
     }

@@ -8,9 +8,11 @@
 //! row above synthesized row, the nine lights left to right).
 //!
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
-//! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--verbose]
+//! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--no-light-tables] [--verbose]
 //! [--sheet DIR] [--seed N] [--pair-rank K] [--shadows attached|cast|auto]
-//! [--coarse laid|mrf|auto]`; `--shadows` sets the range map's shadows and `--coarse` where
+//! [--coarse laid|mrf|auto] [--halfway]`; `--halfway` judges at nine lights halfway between
+//! measured ones instead, the references rendered there by the generator (what the model does
+//! between its measured lights); `--shadows` sets the range map's shadows and `--coarse` where
 //! the exemplar's coarse variation comes from (default for both: auto, analysis chooses); `--seed` sets the synthesis seed (default 1;
 //! one seed's figures move by about 0.1-0.3 crop levels from seed to seed); `--pair-rank K` is
 //! an experiment: every judged image gets the L* table of its own light rebuilt from the mean
@@ -24,8 +26,8 @@
 use std::path::PathBuf;
 
 use btfmrf::analysis::{AnalysisOptions, analyze};
-use btfmrf::btf::synthetic::SyntheticMaterial;
-use btfmrf::btf::{Btf, Direction};
+use btfmrf::btf::synthetic::{SyntheticBtf, SyntheticMaterial};
+use btfmrf::btf::{Btf, Direction, DirectionSet};
 use btfmrf::decompose::ColourSpace;
 use btfmrf::eval::Yardstick;
 use btfmrf::eval::montage::montage;
@@ -46,6 +48,20 @@ const LIGHTS: [(f64, f64); 9] = [
     (60.0, 234.0),
     (75.0, 45.0),
     (75.0, 195.0),
+];
+
+/// Frontal-view lights halfway between measured ones of the Bonn set (`--halfway`): the
+/// generator renders the reference there, the model interpolates.
+const HALFWAY: [(f64, f64); 9] = [
+    (7.5, 60.0),
+    (22.5, 105.0),
+    (37.5, 100.0),
+    (37.5, 200.0),
+    (52.5, 45.0),
+    (52.5, 170.0),
+    (52.5, 300.0),
+    (67.5, 120.0),
+    (67.5, 250.0),
 ];
 
 /// Per CIE plane (L*, a*, b*) of `image`, `mean (p[x+1] - p[x])^2 / (2 var)`: near 0 for a
@@ -159,6 +175,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut verbose = false;
     let mut rank: Option<usize> = None;
     let mut seed = 1;
+    let mut halfway = false;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--clusters" => options.clusters = args.next().ok_or("--clusters N")?.parse()?,
@@ -168,6 +185,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             "--no-colour-tables" => options.colour_matching = false,
             "--no-lit-tables" => options.lit_matching = false,
+            "--no-light-tables" => options.light_tables = false,
             "--shadows" => {
                 options.shadows = match args.next().ok_or("--shadows attached|cast|auto")?.as_str()
                 {
@@ -188,6 +206,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
             }
             "--verbose" => verbose = true,
+            "--halfway" => halfway = true,
             "--seed" => seed = args.next().ok_or("--seed N")?.parse()?,
             "--pair-rank" => rank = Some(args.next().ok_or("--pair-rank K")?.parse()?),
             "--sheet" => sheet = Some(args.next().ok_or("--sheet DIR")?.into()),
@@ -197,6 +216,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if materials.is_empty() {
         materials = SyntheticMaterial::ALL.to_vec();
     }
+    if halfway && rank.is_some() {
+        return Err("--pair-rank needs measured lights: not with --halfway".into());
+    }
+    let judged = if halfway { &HALFWAY } else { &LIGHTS };
     let kind: ModelKind = options.kind;
     for material in materials {
         let i = SyntheticMaterial::ALL
@@ -205,9 +228,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .ok_or("unknown material")?;
         let btf = Btf::synthetic(material, 128, 5)?;
         let another = Btf::synthetic(material, 128, 6)?;
-        let other = Btf::synthetic(SyntheticMaterial::ALL[(i + 1) % 4], 128, 5)?;
+        let other_material = SyntheticMaterial::ALL[(i + 1) % 4];
+        let other = Btf::synthetic(other_material, 128, 5)?;
         let (model, _) = analyze(&btf, &options, &NoProgress)?;
         let view = *btf.views().get(0).ok_or("no view")?;
+        // The references halfway between measured lights, rendered by the generator.
+        let between = |m: SyntheticMaterial,
+                       seed: u64|
+         -> Result<Btf, Box<dyn std::error::Error>> {
+            let views = DirectionSet::new(vec![view])?;
+            let lights =
+                DirectionSet::new(HALFWAY.iter().map(|&(t, p)| Direction::new(t, p)).collect())?;
+            Ok(SyntheticBtf::with_directions(m, 128, seed, &views, &lights)?.into_btf())
+        };
+        let references = if halfway {
+            Some((
+                between(material, 5)?,
+                between(material, 6)?,
+                between(other_material, 5)?,
+            ))
+        } else {
+            None
+        };
         let o = SynthesisOptions {
             rows: 128,
             cols: 128,
@@ -218,24 +260,31 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let tables = rank.map(|k| pair_tables(&btf, k)).transpose()?;
         let (mut log_ratio, mut colour) = (0.0, 0.0);
         let (mut measured_row, mut synthesized_row) = (Vec::new(), Vec::new());
-        for &(theta, phi) in &LIGHTS {
+        for (j, &(theta, phi)) in judged.iter().enumerate() {
             let light = Direction::new(theta, phi);
-            let l = btf
-                .lights()
-                .find(&light, 0.5)
-                .ok_or("light not in the Bonn set")?;
-            let measured = btf.image(0, l)?;
+            // Halfway, the reference sets hold the judged lights in order; else the measured
+            // light's index in the Bonn set.
+            let (sets, l) = match &references {
+                Some((m, a, o)) => ((m, a, o), j),
+                None => (
+                    (&btf, &another, &other),
+                    btf.lights()
+                        .find(&light, 0.5)
+                        .ok_or("light not in the Bonn set")?,
+                ),
+            };
+            let measured = sets.0.image(0, l)?;
             let y = Yardstick::from_samples(
                 &measured,
-                &another.image(0, l)?,
-                Some(&other.image(0, l)?),
+                &sets.1.image(0, l)?,
+                Some(&sets.2.image(0, l)?),
                 1,
             )?;
             let mut image = model.image_from_cache(&cache, &view, &light)?;
             if let Some(t) = &tables {
                 match_lightness(&mut image, &t[l]);
             }
-            if verbose {
+            if verbose && !halfway {
                 let k = model.cluster_of(0, l)?;
                 let (rv, rl) = model.subspaces()[k].representative;
                 let (dv, dl) = (
@@ -294,15 +343,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             measured_row.push(measured);
             synthesized_row.push(image);
         }
-        let n = LIGHTS.len() as f64;
+        let n = judged.len() as f64;
         use btfmrf::model::format;
         println!(
-            "{material} {kind} ({} bytes: exemplar {} with {:?} coarse variation, colour tables {}, lit tables {}, periodic {}, range map {}, {:?} shadows): x{:.2} the crop level (geometric mean), {:.2} Lab",
+            "{material} {kind} ({} bytes: exemplar {} with {:?} coarse variation, colour tables {}, lit tables {}, light tables {}, periodic {}, range map {}, {:?} shadows): x{:.2} the crop level (geometric mean), {:.2} Lab",
             format::to_bytes(&model).len(),
             format::exemplar_bytes(&model),
             model.exemplar().map(|e| e.coarse),
             format::colour_marginal_bytes(&model),
             format::lit_marginal_bytes(&model),
+            format::light_lightness_bytes(&model),
             format::periodic_bytes(&model),
             format::range_map_bytes(&model),
             model.range_map().map(|m| m.shadows),

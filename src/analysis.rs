@@ -18,10 +18,10 @@ use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::relight::Shadows;
 use crate::geometry::{self, relight};
 use crate::model::{
-    AnyLevels, BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LitMarginals,
-    MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES,
-    MaterialModel, MaterialParts, ModelError, ModelKind, PeriodicPart, Principal, RangeMap, Result,
-    SubspaceModel, format,
+    AnyLevels, BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma,
+    LightLightness, LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS,
+    MAX_TILE_SAMPLES, MaterialModel, MaterialParts, ModelError, ModelKind, PeriodicPart, Principal,
+    RangeMap, Result, SubspaceModel, format,
 };
 use crate::mrf::{BandModel, KindVisitor, Levels, Repair, neighbourhood::MAX_ORDER};
 use crate::progress::Progress;
@@ -62,6 +62,11 @@ pub struct AnalysisOptions {
     /// subspace image) and give the subspace image that lightness marginal once relit for the
     /// representative's light ([`crate::model::LitMarginals`]). Default: true.
     pub lit_matching: bool,
+    /// Beside a range map, store the measured L* quantiles under every light in the view
+    /// the map is registered with (74 bytes a light) and give the finished image that
+    /// lightness marginal, blended over the nearest lights
+    /// ([`crate::model::LightLightness`]). Default: true.
+    pub light_tables: bool,
     /// Largest model file, bytes as written (deflated); `None`: no limit. A model above it
     /// drops its exemplar's principal deviations, the last first, until it fits or none is
     /// left ([`within_budget`]). Default: [`MODEL_BUDGET`].
@@ -132,6 +137,7 @@ impl Default for AnalysisOptions {
             band_marginals: false,
             colour_matching: true,
             lit_matching: true,
+            light_tables: true,
             max_bytes: Some(MODEL_BUDGET),
             exemplar_side: None,
             periodic: true,
@@ -498,6 +504,10 @@ pub fn analyze(
             .filter_map(|k| r.get(k).copied())
             .collect()
     };
+    let light_lightness = match &range_map {
+        Some(_) if options.light_tables => Some(light_lightness(btf, frontal)?),
+        _ => None,
+    };
     let model = MaterialModel::new(MaterialParts {
         views: btf.views().clone(),
         lights: btf.lights().clone(),
@@ -509,12 +519,28 @@ pub fn analyze(
         exemplar,
         periodic,
         pair_gains: Vec::new(),
+        light_lightness,
     })?;
     let model = judged_exemplar(btf, model, &judged, options.coarse)?;
     let model = with_pair_gains(model, &measured_luminance)?;
     let (model, trimmed) = within_budget(model, options.max_bytes, &measured_luminance)?;
     report.warnings.extend(trimmed);
     Ok((model, report))
+}
+
+/// The measured L* quantiles of every light's image in `view` ([`LightLightness`]).
+fn light_lightness(btf: &Btf, view: usize) -> Result<LightLightness> {
+    let probabilities = marginals::band_probabilities();
+    let tables = (0..btf.lights().len())
+        .into_par_iter()
+        .map(|l| {
+            let [lightness, _, _] = ColourSpace::Lab.planes(&btf.image(view, l)?);
+            Ok(LitMarginals {
+                lightness: marginals::quantiles_at(&lightness, &probabilities),
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(LightLightness { view, tables })
 }
 
 /// `model` with its exemplar where it takes its coarse variation from (`coarse`, see
@@ -740,6 +766,7 @@ fn off_chroma_shares(
         ),
         periodic: periodic.cloned(),
         pair_gains: Vec::new(),
+        light_lightness: None,
     })?;
     let cache = probe.synthesis_cache(&check_options(btf.width(), btf.height()))?;
     // Every light of the representatives' view whose subspace has a preferred representative.

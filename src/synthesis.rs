@@ -25,7 +25,8 @@ use crate::geometry::{
     resample_periodic, split_detail,
 };
 use crate::model::{
-    CoarseSource, Exemplar, LitMarginals, MaterialModel, ModelError, PeriodicPart, Result,
+    CoarseSource, Exemplar, LightLightness, LitMarginals, MaterialModel, ModelError, PeriodicPart,
+    Result,
 };
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
@@ -472,8 +473,9 @@ impl MaterialModel {
     /// The BTF image for (view, light): the subspace images of the nearest measured pairs,
     /// blended by their barycentric weights times the pairs' gains, then relit by bump mapping
     /// with the range map and seen from the view with its parallax and masking
-    /// ([`parallax::view_warp`]) when the model has one. Only the subspaces needed are
-    /// synthesized.
+    /// ([`parallax::view_warp`]) when the model has one, and given the requested light's
+    /// measured lightness where the model stores light tables ([`LightLightness`]). Only the
+    /// subspaces needed are synthesized.
     ///
     /// # Errors
     /// A non-finite direction or an invalid size.
@@ -565,6 +567,13 @@ impl MaterialModel {
             if let Some(warp) = parallax::view_warp(heights, o.edges(), view.vector()) {
                 out = warp.apply(&out);
             }
+        }
+        // The cluster's subspace image was matched at its representative's light only; the
+        // measured lightness of the requested light itself finishes it.
+        if let Some(tables) = self.light_lightness()
+            && let Some((table, share)) = light_table(self, tables, view, light)?
+        {
+            match_lightness(&mut out, None, &table, share);
         }
         Ok(out)
     }
@@ -730,21 +739,66 @@ impl MaterialModel {
 /// on their own made colours the material does not have, and pushed the leather's frontal
 /// representatives off-chroma).
 fn match_lit(image: &mut Array3<f32>, factor: &Array2<f64>, lit: &LitMarginals) {
+    match_lightness(image, Some(factor), &lit.lightness, 1.0);
+}
+
+/// Scales each pixel of `image`, chromaticity kept, so that its L* (seen through the shading
+/// `factor` when given) moves `share` (0..=1) of the way to the L* that gives the image the
+/// quantiles `lightness` (at [`marginals::band_probabilities`]).
+fn match_lightness(
+    image: &mut Array3<f32>,
+    factor: Option<&Array2<f64>>,
+    lightness: &[f64],
+    share: f64,
+) {
     let mut relit = crate::geometry::relight::luminance(image);
-    relit.zip_mut_with(factor, |y, &f| *y *= f);
-    let lightness = relit.mapv(|y| f64::from(crate::color::lightness(y as f32)));
-    let map = MarginalMap::new(&lightness, &lit.lightness, &marginals::band_probabilities());
+    if let Some(factor) = factor {
+        relit.zip_mut_with(factor, |y, &f| *y *= f);
+    }
+    let current = relit.mapv(|y| f64::from(crate::color::lightness(y as f32)));
+    let map = MarginalMap::new(&current, lightness, &marginals::band_probabilities());
     let mut ratio = relit;
     ndarray::Zip::from(&mut ratio)
-        .and(&lightness)
+        .and(&current)
         .par_for_each(|r, &l| {
-            let target = f64::from(crate::color::luminance_of_lightness(map.apply(l) as f32));
+            let wanted = l + share * (map.apply(l) - l);
+            let target = f64::from(crate::color::luminance_of_lightness(wanted as f32));
             *r = if *r > LIT_DARK { target / *r } else { 1.0 };
         });
     image
         .axis_iter_mut(Axis(0))
         .into_par_iter()
         .for_each(|mut channel| channel.zip_mut_with(&ratio, |v, &r| *v *= r as f32));
+}
+
+/// The L* quantiles `tables` holds for `light` seen from `view`, blended over the nearest
+/// lights with their barycentric weights, and the share of `view` that is the tables' view
+/// (its barycentric weight); `None` where that share is 0.
+fn light_table(
+    model: &MaterialModel,
+    tables: &LightLightness,
+    view: &Direction,
+    light: &Direction,
+) -> Result<Option<(Vec<f64>, f64)>> {
+    let share: f64 = model
+        .views()
+        .interpolate(view)?
+        .iter()
+        .filter(|w| w.index == tables.view)
+        .map(|w| w.weight)
+        .sum();
+    if share <= 0.0 {
+        return Ok(None);
+    }
+    let mut blended = vec![0.0; marginals::BAND_QUANTILES];
+    for w in model.lights().interpolate(light)? {
+        if let Some(t) = tables.tables.get(w.index) {
+            for (b, v) in blended.iter_mut().zip(&t.lightness) {
+                *b += w.weight * v;
+            }
+        }
+    }
+    Ok(Some((blended, share.min(1.0))))
 }
 
 /// Relit luminance below which [`match_lit`] leaves a pixel as it is (a ratio of noise).
@@ -945,6 +999,38 @@ mod tests {
         let got = marginals::quantiles_at(&lightness, &probabilities);
         for (g, t) in got.iter().zip(&lit.lightness) {
             assert!((g - t).abs() < 0.5, "{got:?}");
+        }
+    }
+
+    #[test]
+    fn a_share_of_the_lightness_match_moves_each_quantile_that_share_of_the_way() {
+        let (h, w) = (40, 48);
+        let image = Array3::from_shape_fn((3, h, w), |(c, y, x)| {
+            let t = 0.2 + 0.15 * ((x as f32 * 0.9).sin() + (y as f32 * 0.5).cos()).abs();
+            t * [0.9, 1.0, 0.6][c]
+        });
+        let probabilities = marginals::band_probabilities();
+        let quantiles = |image: &Array3<f32>| {
+            let [lightness, _, _] = ColourSpace::Lab.planes(image);
+            marginals::quantiles_at(&lightness, &probabilities)
+        };
+        let before = quantiles(&image);
+        let table: Vec<f64> = probabilities.iter().map(|p| 20.0 + 60.0 * p).collect();
+        for share in [1.0, 0.5, 0.0] {
+            let mut matched = image.clone();
+            match_lightness(&mut matched, None, &table, share);
+            for ((got, b), t) in quantiles(&matched).iter().zip(&before).zip(&table) {
+                let wanted = b + share * (t - b);
+                assert!(
+                    (got - wanted).abs() < 0.5,
+                    "share {share}: {got} vs {wanted}"
+                );
+            }
+            // Every pixel scaled as a whole: its chromaticity is kept.
+            for (a, b) in matched.lanes(Axis(0)).into_iter().zip(image.lanes(Axis(0))) {
+                let r = a[1] / b[1];
+                assert!((a[0] / b[0] - r).abs() < 1e-4 * r && (a[2] / b[2] - r).abs() < 1e-4 * r);
+            }
         }
     }
 

@@ -6,8 +6,8 @@
 use std::path::PathBuf;
 
 use btfmrf::analysis::{AnalysisOptions, analyze};
-use btfmrf::btf::Btf;
-use btfmrf::btf::synthetic::SyntheticMaterial;
+use btfmrf::btf::synthetic::{SyntheticBtf, SyntheticMaterial};
+use btfmrf::btf::{Btf, Direction, DirectionSet};
 use btfmrf::color::linear_to_lab;
 use btfmrf::decompose::ColourSpace;
 use btfmrf::eval::Yardstick;
@@ -506,6 +506,10 @@ fn measured_pairs_come_back_at_their_measured_brightness() {
         ..AnalysisOptions::default()
     };
     let (model, _) = analyze(&btf, &options, &NoProgress).unwrap();
+    // Without the light tables, which give every frontal light its measured lightness anyway.
+    let mut parts = model.into_parts();
+    parts.light_lightness = None;
+    let model = MaterialModel::new(parts).unwrap();
     let mut parts = model.clone().into_parts();
     parts.pair_gains.clear();
     let plain = MaterialModel::new(parts).unwrap();
@@ -603,9 +607,11 @@ fn a_relit_synthesis_has_its_representatives_lightness() {
     let view = *btf.views().get(0).unwrap();
     let o = plain_options(64, 64, 1);
     let worst = |lit_matching: bool| {
+        // Without the light tables, which would give every light its measured lightness.
         let options = AnalysisOptions {
             clusters: 8,
             lit_matching,
+            light_tables: false,
             ..AnalysisOptions::default()
         };
         let (model, _) = analyze(&btf, &options, &NoProgress).unwrap();
@@ -633,6 +639,71 @@ fn a_relit_synthesis_has_its_representatives_lightness() {
     );
     assert!(with < 0.8, "{with}");
     assert!(without > 1.2, "{without}");
+}
+
+/// Issue 11 item 3: a cluster's lights share one subspace image, whose lightness is matched
+/// at its representative's light only, so at the cluster's other lights the leather's L*
+/// missed the measured by 2-3 Lab units (60-75 degree lights). With the light tables the
+/// finished image takes each light's measured L* quantiles, blended over the nearest measured
+/// lights: checked at measured lights, where the issue's colour target (1.0) must now hold, and
+/// at lights halfway between measured ones, rendered by the generator for the reference, where
+/// the blend must still bring the colour closer and cost no structure (measured: colour 0.85
+/// against 1.62 Lab at the measured lights, 1.11 against 1.22 halfway; structure 0.4 % closer
+/// halfway).
+#[test]
+fn every_light_gets_its_measured_lightness_also_between_the_measured_ones() {
+    let btf = Btf::synthetic(SyntheticMaterial::Leather, 128, 5).unwrap();
+    let (model, _) = analyze(&btf, &AnalysisOptions::default(), &NoProgress).unwrap();
+    assert!(model.light_lightness().is_some());
+    let mut parts = model.clone().into_parts();
+    parts.light_lightness = None;
+    let without = MaterialModel::new(parts).unwrap();
+    let view = Direction::new(0.0, 0.0);
+    let between = [(37.5, 100.0), (52.5, 170.0), (67.5, 120.0), (67.5, 250.0)];
+    let halfway = SyntheticBtf::with_directions(
+        SyntheticMaterial::Leather,
+        128,
+        5,
+        &DirectionSet::new(vec![view]).unwrap(),
+        &DirectionSet::new(between.map(|(t, p)| Direction::new(t, p)).to_vec()).unwrap(),
+    )
+    .unwrap()
+    .into_btf();
+    // Per model: mean colour distance and geometric-mean structure over the lights and seeds.
+    let judged = |lights: &[(f64, f64)], reference: &dyn Fn(usize, &Direction) -> Array3<f32>| {
+        let mut scores = [(0.0, 0.0); 2];
+        for (i, &(theta, phi)) in lights.iter().enumerate() {
+            let light = Direction::new(theta, phi);
+            let y = Yardstick::new(&reference(i, &light), None, 1).unwrap();
+            for seed in [2, 3] {
+                let o = plain_options(128, 128, seed);
+                for (score, m) in scores.iter_mut().zip([&model, &without]) {
+                    let j = y
+                        .judge(&m.synthesize_image(&view, &light, &o).unwrap())
+                        .unwrap()
+                        .judgement;
+                    score.0 += j.colour_lab;
+                    score.1 += j.structure.ln();
+                }
+            }
+        }
+        let n = 2.0 * lights.len() as f64;
+        scores.map(|(c, s)| (c / n, (s / n).exp()))
+    };
+    let measured = [(30.0, 90.0), (60.0, 90.0), (75.0, 45.0), (75.0, 195.0)];
+    let [at, at_without] = judged(&measured, &|_, light| {
+        btf.image(0, btf.lights().find(light, 0.5).unwrap())
+            .unwrap()
+    });
+    let [mid, mid_without] = judged(&between, &|i, _| halfway.image(0, i).unwrap());
+    println!(
+        "leather, with / without light tables: measured lights colour {:.2} / {:.2} Lab, \
+         structure {:.4} / {:.4}; halfway lights colour {:.2} / {:.2} Lab, structure {:.4} / {:.4}",
+        at.0, at_without.0, at.1, at_without.1, mid.0, mid_without.0, mid.1, mid_without.1
+    );
+    assert!(at.0 <= 1.0 && at.0 < at_without.0, "{at:?} {at_without:?}");
+    assert!(mid.0 < mid_without.0, "{mid:?} {mid_without:?}");
+    assert!(mid.1 < 1.02 * mid_without.1, "{mid:?} {mid_without:?}");
 }
 
 /// Issue 11 item 3: the demo's sponge (64^2, seed 1), judged over the bench's eight pairs,

@@ -4,9 +4,10 @@
 use std::path::Path;
 
 use super::material::{
-    BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LitMarginals,
-    MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES,
-    MaterialModel, MaterialParts, PeriodicPart, Principal, RangeMap, SubspaceModel,
+    BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LightLightness,
+    LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS,
+    MAX_TILE_SAMPLES, MaterialModel, MaterialParts, PeriodicPart, Principal, RangeMap,
+    SubspaceModel,
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
@@ -28,7 +29,7 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// files (no lit lightness tables), version 8 files (exemplar L* deviations always 8-bit),
 /// version 9 files (no cast shadows) and version 10 files (an exemplar's coarse variation
 /// always the MRF's) are still read.
-pub const VERSION: u16 = 11;
+pub const VERSION: u16 = 12;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -140,7 +141,54 @@ pub fn to_payload(model: &MaterialModel) -> Vec<u8> {
     write_colour(&mut w, model);
     write_pair_gains(&mut w, model);
     write_lit_marginals(&mut w, model);
+    write_light_lightness(&mut w, model.light_lightness());
     w.0
+}
+
+/// The version 12 light lightness tables ([`LightLightness`]): a flag, then the view (u16) and
+/// one table a light.
+fn write_light_lightness(w: &mut Writer, tables: Option<&LightLightness>) {
+    let Some(t) = tables else {
+        w.u8(0);
+        return;
+    };
+    w.u8(1);
+    w.u16(t.view as u16);
+    for table in &t.tables {
+        write_quantised(w, &table.lightness, Storage::Double);
+    }
+}
+
+/// Reads what [`write_light_lightness`] wrote, for `lights` lights.
+fn read_light_lightness(r: &mut Reader, lights: usize) -> Parse<Option<LightLightness>> {
+    if r.u8_at_most(1, "light lightness flag")? == 0 {
+        return Ok(None);
+    }
+    let view = usize::from(r.u16()?);
+    r.ensure(lights, LIT_TABLE_BYTES, "light lightness tables")?;
+    let tables = (0..lights)
+        .map(|_| {
+            Ok(LitMarginals {
+                lightness: read_table(r, BAND_QUANTILES, "light lightness quantile")?,
+            })
+        })
+        .collect::<Parse<Vec<_>>>()?;
+    Ok(Some(LightLightness { view, tables }))
+}
+
+/// Bytes one lightness table takes in the file: its range (two f32) and a u16 a quantile.
+const LIT_TABLE_BYTES: usize = 8 + 2 * BAND_QUANTILES;
+
+/// Bytes the light lightness tables take in the file beyond their flag (0 without them).
+pub fn light_lightness_bytes(model: &MaterialModel) -> usize {
+    model
+        .light_lightness()
+        .map_or(0, light_lightness_record_bytes)
+}
+
+/// Bytes [`write_light_lightness`] writes for `t` after the flag: the view and the tables.
+fn light_lightness_record_bytes(t: &LightLightness) -> usize {
+    2 + t.tables.len() * LIT_TABLE_BYTES
 }
 
 /// The version 8 lit lightness tables ([`LitMarginals`]): a flag, then one table a subspace
@@ -162,11 +210,7 @@ fn read_lit_marginals(r: &mut Reader, subspaces: &mut [SubspaceModel]) -> Parse<
     if r.u8_at_most(1, "lit table flag")? == 0 {
         return Ok(());
     }
-    r.ensure(
-        subspaces.len(),
-        8 + 2 * BAND_QUANTILES,
-        "lit lightness tables",
-    )?;
+    r.ensure(subspaces.len(), LIT_TABLE_BYTES, "lit lightness tables")?;
     for s in subspaces.iter_mut() {
         s.lit_marginals = Some(LitMarginals {
             lightness: read_table(r, BAND_QUANTILES, "lit lightness quantile")?,
@@ -179,7 +223,7 @@ fn read_lit_marginals(r: &mut Reader, subspaces: &mut [SubspaceModel]) -> Parse<
 pub fn lit_marginal_bytes(model: &MaterialModel) -> usize {
     let subspaces = model.subspaces();
     if subspaces.iter().all(|s| s.lit_marginals.is_some()) {
-        subspaces.len() * (8 + 2 * BAND_QUANTILES)
+        subspaces.len() * LIT_TABLE_BYTES
     } else {
         0
     }
@@ -787,6 +831,11 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     if version >= 8 {
         read_lit_marginals(&mut r, &mut subspaces)?;
     }
+    let light_lightness = if version >= 12 {
+        read_light_lightness(&mut r, lights.len())?
+    } else {
+        None
+    };
     r.finish()?;
     MaterialModel::new(MaterialParts {
         views,
@@ -799,6 +848,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         exemplar,
         periodic,
         pair_gains,
+        light_lightness,
     })
     .map_err(|e| e.to_string())
 }
@@ -1278,6 +1328,45 @@ mod tests {
         assert_eq!(coarse(&record(Some(1)), 11), CoarseSource::Laid);
         let e = read(&record(Some(2)), 11).unwrap_err();
         assert!(e.contains("coarse source 2"), "{e}");
+    }
+
+    #[test]
+    fn light_lightness_tables_read_back_in_their_counted_bytes() {
+        let tables = LightLightness {
+            view: 3,
+            tables: (0..5)
+                .map(|l| LitMarginals {
+                    lightness: (0..BAND_QUANTILES)
+                        .map(|q| f64::from(l as u8) + 2.5 * q as f64)
+                        .collect(),
+                })
+                .collect(),
+        };
+        let mut w = Writer(Vec::new());
+        write_light_lightness(&mut w, Some(&tables));
+        assert_eq!(w.0.len(), 1 + light_lightness_record_bytes(&tables));
+        let read = read_light_lightness(&mut Reader::new(&w.0), 5)
+            .unwrap()
+            .unwrap();
+        assert_eq!(read.view, 3);
+        for (a, b) in read.tables.iter().zip(&tables.tables) {
+            for (x, y) in a.lightness.iter().zip(&b.lightness) {
+                assert!((x - y).abs() < 1e-3, "{x} vs {y}");
+            }
+        }
+        // Without tables, one byte; more lights than the bytes hold: refused before reading.
+        let mut none = Writer(Vec::new());
+        write_light_lightness(&mut none, None);
+        assert_eq!(none.0, [0]);
+        assert!(
+            read_light_lightness(&mut Reader::new(&none.0), 5)
+                .unwrap()
+                .is_none()
+        );
+        let e = read_light_lightness(&mut Reader::new(&w.0), 6).unwrap_err();
+        assert!(e.contains("light lightness tables"), "{e}");
+        let e = read_light_lightness(&mut Reader::new(&[2]), 5).unwrap_err();
+        assert!(e.contains("light lightness flag"), "{e}");
     }
 
     #[test]

@@ -71,6 +71,32 @@ pub struct LitMarginals {
     pub lightness: Vec<f64>,
 }
 
+/// The measured L* distribution under every light in the view the range map is registered with
+/// (format version 12), relief shading and all. A cluster's lights share one subspace image,
+/// relit by the synthesized relief; its lightness was matched to the representative's light
+/// only ([`LitMarginals`]), so at the cluster's other lights the L* quantiles missed the
+/// measured ones (the leather by 2-3 Lab units at 60-75 degrees). Synthesis maps the finished
+/// image's L* (chromaticity kept) onto these tables, blended over the nearest lights with the
+/// same barycentric weights as the images, in proportion to the registered view's weight
+/// (`crate::synthesis`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LightLightness {
+    /// The view the tables were measured in.
+    pub view: usize,
+    /// One table per light, in the order of the model's lights.
+    pub tables: Vec<LitMarginals>,
+}
+
+impl LitMarginals {
+    /// Whether the table holds [`BAND_QUANTILES`] non-decreasing finite values.
+    fn is_table(&self) -> bool {
+        let t = &self.lightness;
+        t.len() == BAND_QUANTILES
+            && t.iter().all(|v| v.is_finite())
+            && t.windows(2).all(|w| w[0] <= w[1])
+    }
+}
+
 /// The measured marginal distribution of every pyramid band of a subspace image (format
 /// version 2; mrf_math.md 1(f')): each synthesized band is mapped onto it before the pyramid
 /// is collapsed, so sparse, heavy-tailed bands (edges, pores) are not left Gaussian.
@@ -178,6 +204,9 @@ pub struct MaterialParts {
     /// elsewhere in a synthesis than in the photograph change the mean. Empty: 1 for every
     /// pair (files before version 5).
     pub pair_gains: Vec<f32>,
+    /// The measured L* quantiles under every light in the range map's view, if stored
+    /// (format version 12; only beside a range map).
+    pub light_lightness: Option<LightLightness>,
 }
 
 /// Most samples per lattice period and axis a periodic tile keeps (larger periods are
@@ -518,9 +547,7 @@ impl MaterialModel {
                 ));
             }
             if let Some(t) = &s.lit_marginals
-                && (t.lightness.len() != BAND_QUANTILES
-                    || t.lightness.iter().any(|v| !v.is_finite())
-                    || t.lightness.windows(2).any(|w| w[1] < w[0]))
+                && !t.is_table()
             {
                 return bad(format!(
                     "subspace {k}: its lit lightness table is not {BAND_QUANTILES} non-decreasing finite values"
@@ -614,6 +641,19 @@ impl MaterialModel {
                 parts.pair_gains.len()
             ));
         }
+        if let Some(t) = &parts.light_lightness
+            && (parts.range_map.is_none()
+                || t.view >= nv
+                || t.tables.len() != nl
+                || !t.tables.iter().all(LitMarginals::is_table))
+        {
+            return bad(format!(
+                "light lightness tables for view {} of {nv}, {} tables for {nl} lights (each {BAND_QUANTILES} non-decreasing finite values), range map {}",
+                t.view,
+                t.tables.len(),
+                parts.range_map.is_some()
+            ));
+        }
         if let Some(r) = &parts.range_map {
             let sides = [r.rows, r.cols, r.step];
             if sides.iter().any(|&n| n == 0 || n > MAX_COUNT) || r.heights.len() != r.rows * r.cols
@@ -684,6 +724,11 @@ impl MaterialModel {
     /// Every pair's gain, view-major (empty: 1 for every pair).
     pub fn pair_gains(&self) -> &[f32] {
         &self.parts.pair_gains
+    }
+
+    /// The measured L* quantiles under every light in the range map's view, if stored.
+    pub fn light_lightness(&self) -> Option<&LightLightness> {
+        self.parts.light_lightness.as_ref()
     }
 
     /// One model per cluster (at least one).
@@ -782,6 +827,7 @@ mod tests {
             exemplar: None,
             periodic: None,
             pair_gains: Vec::new(),
+            light_lightness: None,
         }
     }
 
@@ -924,6 +970,36 @@ mod tests {
             e.contains("subspace 0: its lit lightness table is not"),
             "{e}"
         );
+        // Light tables: one per light of a view the model has, beside a range map.
+        let lights = |view: usize, count: usize| LightLightness {
+            view,
+            tables: vec![lit.clone(); count],
+        };
+        let with_map = |p: &mut MaterialParts| p.range_map = Some(flat_map(6));
+        assert!(
+            MaterialModel::new(MaterialParts {
+                light_lightness: Some(lights(1, 3)),
+                range_map: Some(flat_map(6)),
+                ..parts()
+            })
+            .is_ok()
+        );
+        for (view, count, map) in [(0, 3, false), (2, 3, true), (0, 2, true)] {
+            let e = refused(|p| {
+                if map {
+                    with_map(p);
+                }
+                p.light_lightness = Some(lights(view, count));
+            });
+            assert!(e.contains("light lightness tables"), "{e}");
+        }
+        let e = refused(|p| {
+            with_map(p);
+            let mut t = lights(0, 3);
+            t.tables[2].lightness[5] = f64::NAN;
+            p.light_lightness = Some(t);
+        });
+        assert!(e.contains("light lightness tables"), "{e}");
         let e = refused(|p| {
             p.exemplar = Some(Exemplar {
                 rows: 2,

@@ -99,7 +99,8 @@ struct ModelInfo<'a> {
 /// One optional part of an MRF model file.
 #[derive(serde::Serialize)]
 struct ModelPart {
-    /// "exemplar", "range map", "lattice", "colour tables", "lit tables" or "band tables".
+    /// "exemplar", "range map", "lattice", "colour tables", "lit tables", "light tables" or
+    /// "band tables".
     part: &'static str,
     /// Its bytes in the payload before deflate.
     bytes: usize,
@@ -131,6 +132,17 @@ fn model_parts(m: &MaterialModel) -> Vec<ModelPart> {
         format::lit_marginal_bytes(m),
         format!("relit L* quantiles of {clusters} subspace images"),
     );
+    if let Some(t) = m.light_lightness() {
+        add(
+            "light tables",
+            format::light_lightness_bytes(m),
+            format!(
+                "L* quantiles under each of {} lights in view {}",
+                t.tables.len(),
+                t.view
+            ),
+        );
+    }
     if let Some(e) = m.exemplar() {
         let coarse = match e.coarse {
             CoarseSource::Mrf => "the MRF",

@@ -395,13 +395,19 @@ fn info_describes_a_model_file() {
     };
     assert_eq!(
         parts(&info),
-        ["colour tables", "lit tables", "exemplar", "range map"],
+        [
+            "colour tables",
+            "lit tables",
+            "light tables",
+            "exemplar",
+            "range map"
+        ],
         "{info}"
     );
     let leather = repo().join("models/leather.btfm");
     let info: serde_json::Value =
         serde_json::from_str(&ok(&["info", s(&leather), "--json"])).unwrap();
-    let exemplar = &info["parts"][2];
+    let exemplar = &info["parts"][3];
     assert!(
         exemplar["holds"]
             .as_str()

@@ -196,6 +196,7 @@ mod tests {
             exemplar: None,
             periodic: None,
             pair_gains: Vec::new(),
+            light_lightness: None,
         })
         .unwrap()
     }
