@@ -763,3 +763,49 @@ fn relit_highlights_stay_in_range_and_keep_their_colour() {
     }
     assert!(clipped[0] / measured[0] > 2.0, "{clipped:.1?}");
 }
+
+/// Standard deviation of `plane`'s Gaussian blur at `sigma` px, `2 sigma` px of border cut.
+fn coarse_spread(plane: &ndarray::Array2<f64>, sigma: f64) -> f64 {
+    let (coarse, _) = btfmrf::geometry::split_detail(plane, sigma, false);
+    let cut = (2.0 * sigma) as usize;
+    let (h, w) = coarse.dim();
+    coarse
+        .slice(ndarray::s![cut..h - cut, cut..w - cut])
+        .std(0.0)
+}
+
+/// Issue 11 item 3, found by looking at a 512^2 leather: orange and dark-brown patches 50-100
+/// px across that the measured leather lacks. Cause (docs/BENCHMARKS.md, "Diagnosis: the
+/// leather's orange blotches"): the exemplar's 2 x 2 chroma blocks drop the chroma's
+/// pixel-scale part, and the joint colour transfer makes up the variance by stretching the
+/// coarser chroma. Here, on the generator's float images, the chroma blurred at 4 px varies
+/// 1.57x (a*) and 1.68x (b*) as much as the measured, the L* 1.15x; from the JPEG frames of
+/// `btfmrf generate` (as `models/leather.btfm` was made) about 4x. The bound is the issue's
+/// 25 % for the chroma's spread. Not fixed yet: this is the target for the fix.
+#[test]
+#[ignore = "fails today (a* 1.57x, b* 1.68x the measured at 4 px); the chroma blotch fix is open"]
+fn an_enlarged_leather_has_the_measured_chroma_at_coarse_scales() {
+    let btf = Btf::synthetic(SyntheticMaterial::Leather, 128, 5).unwrap();
+    let (model, _) = analyze(&btf, &AnalysisOptions::default(), &NoProgress).unwrap();
+    let light = Direction::new(45.0, 160.0);
+    let l = btf.lights().find(&light, 0.5).unwrap();
+    let measured = ColourSpace::Lab.planes(&btf.image(0, l).unwrap());
+    let synth = ColourSpace::Lab.planes(
+        &model
+            .synthesize_image(
+                &Direction::new(0.0, 0.0),
+                &light,
+                &plain_options(512, 512, 1),
+            )
+            .unwrap(),
+    );
+    let ratios: Vec<f64> = (0..3)
+        .map(|c| coarse_spread(&synth[c], 4.0) / coarse_spread(&measured[c], 4.0))
+        .collect();
+    println!("L*, a*, b* spread blurred at 4 px, synthesized over measured: {ratios:.2?}");
+    assert!(ratios[0] < 1.25, "the lightness: {ratios:?}");
+    assert!(
+        ratios[1] < 1.25 && ratios[2] < 1.25,
+        "the chroma: {ratios:?}"
+    );
+}

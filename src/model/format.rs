@@ -27,8 +27,8 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// periodic part), version 4 files (one exemplar crop with a gain per subspace), version 5
 /// files (no exemplar chroma), version 6 files (no chroma-lightness coupling), version 7
 /// files (no lit lightness tables), version 8 files (exemplar L* deviations always 8-bit),
-/// version 9 files (no cast shadows) and version 10 files (an exemplar's coarse variation
-/// always the MRF's) are still read.
+/// version 9 files (no cast shadows), version 10 files (an exemplar's coarse variation
+/// always the MRF's) and version 11 files (no light lightness tables) are still read.
 pub const VERSION: u16 = 12;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
