@@ -19,7 +19,8 @@
 //! and K principal components (8-bit coefficients) of the tables of all frontal lights, as
 //! per-pair tables stored that way would give it; `--direction-share` weighs the light and view directions in the clustering
 //! (see `AnalysisOptions::direction_share`); `--verbose` adds each light's subspace and its
-//! representative, and the share of the L*, a* and b* variance in neighbour differences (near 0:
+//! representative, the spread of L*, a* and b* blurred at 4 px over the measured (coarse colour
+//! variation), and the share of the L*, a* and b* variance in neighbour differences (near 0:
 //! colour constant over regions; 1: white noise), its L* percentiles, and the share of the
 //! chroma steps found off lightness edges.
 
@@ -71,6 +72,17 @@ fn fine_share(image: &Array3<f32>) -> [f64; 3] {
         let steps = &p.slice(s![.., 1..]) - &p.slice(s![.., ..-1]);
         let var = p.var(0.0).max(1e-12);
         steps.mapv(|d| d * d).mean().unwrap_or(0.0) / (2.0 * var)
+    })
+}
+
+/// Per CIE plane of `image`, the standard deviation of its Gaussian blur at 4 px (8 px of
+/// border cut): the coarse variation, where the leather's chroma blotches show
+/// (docs/BENCHMARKS.md) though the judge's colour marginals do not.
+fn coarse_spread(image: &Array3<f32>) -> [f64; 3] {
+    ColourSpace::Lab.planes(image).map(|p| {
+        let (coarse, _) = btfmrf::geometry::split_detail(&p, 4.0, false);
+        let (h, w) = coarse.dim();
+        coarse.slice(s![8..h - 8, 8..w - 8]).std(0.0)
     })
 }
 
@@ -336,6 +348,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     "  L*, a*, b* fine share: measured {:.3?}, synthesized {:.3?}",
                     fine_share(&measured),
                     fine_share(&image)
+                );
+                let (m, s) = (coarse_spread(&measured), coarse_spread(&image));
+                println!(
+                    "  L*, a*, b* spread blurred at 4 px, synthesized over measured: {:.2?}",
+                    [0, 1, 2].map(|c| s[c] / m[c].max(1e-12))
                 );
             }
             log_ratio += v.structure_vs_crop.ln();
