@@ -138,7 +138,8 @@ pub struct Args {
     /// representative's light only. On the built-in materials (128^2, nine measured frontal lights,
     /// seeds 1-4) colour went from 0.56-1.50 to 0.25-0.66 Lab and structure from x1.26-4.72 to
     /// x1.12-4.28 the another-crop level; halfway between measured lights the leather, stones and
-    /// knit still gain and the sponge loses 3-5 % of structure.
+    /// knit still gain and the sponge loses 3-5 % of structure. 6 KB for 81 lights. `render`
+    /// and `view` do not apply them yet.
     #[arg(long)]
     no_light_tables: bool,
     /// Largest side of the structure exemplar (pixels; 0: none): the L* of a centred crop of
