@@ -165,7 +165,7 @@ fn read_light_lightness(r: &mut Reader, lights: usize) -> Parse<Option<LightLigh
         return Ok(None);
     }
     let view = usize::from(r.u16()?);
-    r.ensure(lights, LIT_TABLE_BYTES, "light lightness tables")?;
+    r.ensure(lights, TABLE_BYTES, "light lightness tables")?;
     let tables = (0..lights)
         .map(|_| {
             Ok(LitMarginals {
@@ -176,8 +176,9 @@ fn read_light_lightness(r: &mut Reader, lights: usize) -> Parse<Option<LightLigh
     Ok(Some(LightLightness { view, tables }))
 }
 
-/// Bytes one lightness table takes in the file: its range (two f32) and a u16 a quantile.
-const LIT_TABLE_BYTES: usize = 8 + 2 * BAND_QUANTILES;
+/// Bytes one quantile table at [`BAND_QUANTILES`] probabilities takes in the file (band,
+/// colour, lit and light tables): its range (two f32) and a u16 a quantile.
+const TABLE_BYTES: usize = 8 + 2 * BAND_QUANTILES;
 
 /// Bytes the light lightness tables take in the file beyond their flag (0 without them).
 pub fn light_lightness_bytes(model: &MaterialModel) -> usize {
@@ -188,7 +189,7 @@ pub fn light_lightness_bytes(model: &MaterialModel) -> usize {
 
 /// Bytes [`write_light_lightness`] writes for `t` after the flag: the view and the tables.
 fn light_lightness_record_bytes(t: &LightLightness) -> usize {
-    2 + t.tables.len() * LIT_TABLE_BYTES
+    2 + t.tables.len() * TABLE_BYTES
 }
 
 /// The version 8 lit lightness tables ([`LitMarginals`]): a flag, then one table a subspace
@@ -210,7 +211,7 @@ fn read_lit_marginals(r: &mut Reader, subspaces: &mut [SubspaceModel]) -> Parse<
     if r.u8_at_most(1, "lit table flag")? == 0 {
         return Ok(());
     }
-    r.ensure(subspaces.len(), LIT_TABLE_BYTES, "lit lightness tables")?;
+    r.ensure(subspaces.len(), TABLE_BYTES, "lit lightness tables")?;
     for s in subspaces.iter_mut() {
         s.lit_marginals = Some(LitMarginals {
             lightness: read_table(r, BAND_QUANTILES, "lit lightness quantile")?,
@@ -223,7 +224,7 @@ fn read_lit_marginals(r: &mut Reader, subspaces: &mut [SubspaceModel]) -> Parse<
 pub fn lit_marginal_bytes(model: &MaterialModel) -> usize {
     let subspaces = model.subspaces();
     if subspaces.iter().all(|s| s.lit_marginals.is_some()) {
-        subspaces.len() * LIT_TABLE_BYTES
+        subspaces.len() * TABLE_BYTES
     } else {
         0
     }
@@ -451,7 +452,7 @@ pub fn periodic_bytes(model: &MaterialModel) -> usize {
 pub fn band_marginal_bytes(model: &MaterialModel) -> usize {
     let subspaces = model.subspaces();
     if subspaces.iter().all(|s| s.band_marginals.is_some()) {
-        subspaces.len() * model.levels() * 3 * (8 + 2 * BAND_QUANTILES)
+        subspaces.len() * model.levels() * 3 * TABLE_BYTES
     } else {
         0
     }
@@ -472,7 +473,7 @@ pub fn exemplar_bytes(model: &MaterialModel) -> usize {
 pub fn colour_marginal_bytes(model: &MaterialModel) -> usize {
     let subspaces = model.subspaces();
     if subspaces.iter().all(|s| s.colour_marginals.is_some()) {
-        subspaces.len() * DIRECTIONS * (8 + 2 * BAND_QUANTILES)
+        subspaces.len() * DIRECTIONS * TABLE_BYTES
     } else {
         0
     }
@@ -966,7 +967,7 @@ fn read_colour_marginals(
     }
     r.ensure(
         subspaces.len() * DIRECTIONS,
-        8 + 2 * BAND_QUANTILES,
+        TABLE_BYTES,
         "colour quantiles",
     )?;
     for s in subspaces.iter_mut() {
