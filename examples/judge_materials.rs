@@ -86,6 +86,14 @@ fn coarse_spread(image: &Array3<f32>) -> [f64; 3] {
     })
 }
 
+/// The standard deviation of `image`'s L* in each band of a 6-level Laplacian pyramid, finest
+/// first (the last the coarse rest).
+fn lightness_bands(image: &Array3<f32>) -> Vec<f64> {
+    let [l, _, _] = ColourSpace::Lab.planes(image);
+    let bands = btfmrf::decompose::Pyramid::decompose(&l, 6).bands;
+    bands.iter().map(|b| b.std(0.0)).collect()
+}
+
 /// The share of the chroma's horizontal neighbour-difference energy (a*^2 + b*^2) found where
 /// the L* step is below its median: colour edges without a lightness edge (a stone two-toned
 /// by a quilt cut), where a material's own colour edges mostly follow its lightness edges.
@@ -353,6 +361,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 println!(
                     "  L*, a*, b* spread blurred at 4 px, synthesized over measured: {:.2?}",
                     [0, 1, 2].map(|c| s[c] / m[c].max(1e-12))
+                );
+                let (m, s) = (lightness_bands(&measured), lightness_bands(&image));
+                println!(
+                    "  L* spread per pyramid band (finest first), synthesized over measured: {:.2?}",
+                    m.iter()
+                        .zip(&s)
+                        .map(|(m, s)| s / m.max(1e-12))
+                        .collect::<Vec<_>>()
                 );
             }
             log_ratio += v.structure_vs_crop.ln();

@@ -388,7 +388,7 @@ impl MaterialModel {
             }
         }
         if let Some(c) = &s.colour_marginals {
-            c.transfer(&mut colours);
+            c.transfer(&mut colours, border);
         }
         let mut image = s.kl.space.linear_image(&colours);
         if let Some(p) = self.periodic()

@@ -442,6 +442,13 @@ fn band_marginals_round_trip_and_version_1_models_still_read() {
         format::band_marginal_bytes(&back),
         3 * model.levels() * 3 * 74
     );
+    // Per subspace: 12 colour tables, 8 coupling pairs and a spread pair per chroma band (five
+    // at 32^2, the coarsest 2 x 2).
+    let bands = 5;
+    assert_eq!(
+        format::colour_marginal_bytes(&back),
+        3 * (12 * 74 + 4 * (16 + 2 * bands))
+    );
     for (a, b) in model.subspaces().iter().zip(back.subspaces()) {
         assert_eq!(b.kl.space, ColourSpace::Lab);
         // The chroma-lightness coupling (version 7) comes back to single precision.
@@ -457,6 +464,22 @@ fn band_marginals_round_trip_and_version_1_models_still_read() {
             .zip(coupling(b).iter().flatten())
         {
             assert!((ca - cb).abs() <= 1e-5 * ca.abs().max(1.0), "{ca} vs {cb}");
+        }
+        // So do the chroma spreads (version 13): one (a*, b*) pair per band, as measured.
+        let spread = |s: &btfmrf::model::SubspaceModel| {
+            s.colour_marginals
+                .as_ref()
+                .and_then(|c| c.chroma_spread.clone())
+                .unwrap()
+        };
+        let (sa, sb) = (spread(a), spread(b));
+        assert_eq!(sa.len(), sb.len());
+        assert!(
+            !sa.is_empty() && sa.iter().flatten().all(|v| *v > 0.0),
+            "{sa:?}"
+        );
+        for (x, y) in sa.iter().flatten().zip(sb.iter().flatten()) {
+            assert!((x - y).abs() <= 1e-6 * x.max(1.0), "{x} vs {y}");
         }
         let (ta, tb) = (
             a.band_marginals.as_ref().unwrap(),
@@ -777,13 +800,14 @@ fn coarse_spread(plane: &ndarray::Array2<f64>, sigma: f64) -> f64 {
 /// Issue 11 item 3, found by looking at a 512^2 leather: orange and dark-brown patches 50-100
 /// px across that the measured leather lacks. Cause (docs/BENCHMARKS.md, "Diagnosis: the
 /// leather's orange blotches"): the exemplar's 2 x 2 chroma blocks drop the chroma's
-/// pixel-scale part, and the joint colour transfer makes up the variance by stretching the
-/// coarser chroma. Here, on the generator's float images, the chroma blurred at 4 px varies
-/// 1.57x (a*) and 1.68x (b*) as much as the measured, the L* 1.15x; from the JPEG frames of
-/// `btfmrf generate` (as `models/leather.btfm` was made) about 4x. The bound is the issue's
-/// 25 % for the chroma's spread. Not fixed yet: this is the target for the fix.
+/// pixel-scale part, and the joint colour transfer made up the variance by stretching the
+/// coarser chroma: on the generator's float images the chroma blurred at 4 px varied 1.57x
+/// (a*) and 1.68x (b*) as much as the measured; from the JPEG frames of `btfmrf generate` (as
+/// `models/leather.btfm` is made) about 4x. The chroma spreads (format version 13) scale each
+/// of the chroma's pyramid bands to the measured spread within the transfer: now 1.16x and
+/// 1.16x. The bound is the issue's 25 % for the chroma's spread, either way. (At 12 px the
+/// chroma still spreads 1.3x the measured, as the L* does, which the chroma follows.)
 #[test]
-#[ignore = "fails today (a* 1.57x, b* 1.68x the measured at 4 px); the chroma blotch fix is open"]
 fn an_enlarged_leather_has_the_measured_chroma_at_coarse_scales() {
     let btf = Btf::synthetic(SyntheticMaterial::Leather, 128, 5).unwrap();
     let (model, _) = analyze(&btf, &AnalysisOptions::default(), &NoProgress).unwrap();
@@ -803,9 +827,9 @@ fn an_enlarged_leather_has_the_measured_chroma_at_coarse_scales() {
         .map(|c| coarse_spread(&synth[c], 4.0) / coarse_spread(&measured[c], 4.0))
         .collect();
     println!("L*, a*, b* spread blurred at 4 px, synthesized over measured: {ratios:.2?}");
-    assert!(ratios[0] < 1.25, "the lightness: {ratios:?}");
+    assert!(ratios[0] < 1.25, "the lightness: {ratios:.2?}");
     assert!(
-        ratios[1] < 1.25 && ratios[2] < 1.25,
-        "the chroma: {ratios:?}"
+        ratios[1..].iter().all(|r| (0.75..1.25).contains(r)),
+        "the chroma: {ratios:.2?}"
     );
 }

@@ -45,14 +45,14 @@ impl Border {
 /// per axis keeps the border logic out of the per-pixel loops.
 pub(crate) type Taps = Vec<Vec<(usize, f64)>>;
 
-/// Taps of the blur along an axis of length `n`, mirrored borders.
-fn blur_taps(n: usize) -> Taps {
+/// Taps of the blur along an axis of length `n`.
+fn blur_taps(n: usize, border: Border) -> Taps {
     (0..n)
         .map(|i| {
             KERNEL
                 .iter()
                 .enumerate()
-                .map(|(k, &w)| (mirror(i as isize + k as isize - 2, n), w))
+                .map(|(k, &w)| (border.index(i as isize + k as isize - 2, n), w))
                 .collect()
         })
         .collect()
@@ -116,12 +116,22 @@ pub(crate) fn apply_separable(
     out
 }
 
-/// REDUCE: blur and keep every other row and column; shape `(ceil(h/2), ceil(w/2))`.
+/// REDUCE: blur and keep every other row and column; shape `(ceil(h/2), ceil(w/2))`, mirrored
+/// borders.
 pub fn reduce(image: &Array2<f64>) -> Array2<f64> {
+    reduce_with(image, Border::Mirror)
+}
+
+/// REDUCE with a chosen border rule.
+fn reduce_with(image: &Array2<f64>, border: Border) -> Array2<f64> {
     let (rows, cols) = image.dim();
     // Only every other output sample is kept, so only those taps are built.
     let keep = |taps: Taps| taps.into_iter().step_by(2).collect::<Taps>();
-    apply_separable(image, &keep(blur_taps(rows)), &keep(blur_taps(cols)))
+    apply_separable(
+        image,
+        &keep(blur_taps(rows, border)),
+        &keep(blur_taps(cols, border)),
+    )
 }
 
 /// EXPAND to an explicit `(rows, cols)` (the size of the finer level), mirrored borders.
@@ -150,14 +160,20 @@ impl Pyramid {
     /// Splits `image` into `levels` bands (at least 1; fewer if the image gets smaller than
     /// 2x2 first).
     pub fn decompose(image: &Array2<f64>, levels: usize) -> Self {
+        Self::decompose_with(image, levels, Border::Mirror)
+    }
+
+    /// Splits with a chosen border rule: [`Border::Periodic`] for a tileable image (of even
+    /// sizes down the pyramid), whose bands then wrap around like it.
+    pub fn decompose_with(image: &Array2<f64>, levels: usize, border: Border) -> Self {
         let mut bands = Vec::with_capacity(levels);
         let mut current = image.clone();
         for _ in 1..levels.max(1) {
             if current.nrows() < 2 || current.ncols() < 2 {
                 break;
             }
-            let coarse = reduce(&current);
-            let up = expand(&coarse, current.nrows(), current.ncols());
+            let coarse = reduce_with(&current, border);
+            let up = expand_with(&coarse, current.nrows(), current.ncols(), border);
             bands.push(&current - &up);
             current = coarse;
         }
@@ -256,6 +272,36 @@ mod tests {
             let err = (&back - &x).mapv(f64::abs).fold(0.0f64, |m, &v| m.max(v));
             assert!(err < 1e-12, "{h}x{w}: {err}");
         }
+    }
+
+    #[test]
+    fn a_periodic_pyramid_shifts_with_its_image() {
+        // On a torus whose sides halve at every level, shifting the image by a multiple of the
+        // coarsest step shifts every band by its share: no band knows where the edges are.
+        let (h, w, levels) = (32, 48, 4);
+        let x = field(h, w);
+        let shifted = Array2::from_shape_fn((h, w), |(i, j)| x[((i + 8) % h, (j + 16) % w)]);
+        let (p, q) = (
+            Pyramid::decompose_with(&x, levels, Border::Periodic),
+            Pyramid::decompose_with(&shifted, levels, Border::Periodic),
+        );
+        for (k, (a, b)) in p.bands.iter().zip(&q.bands).enumerate() {
+            let (bh, bw) = a.dim();
+            let (di, dj) = (8 >> k, 16 >> k);
+            let err = Array2::from_shape_fn((bh, bw), |(i, j)| {
+                (a[((i + di) % bh, (j + dj) % bw)] - b[(i, j)]).abs()
+            })
+            .fold(0.0f64, |m, &v| m.max(v));
+            assert!(err < 1e-12, "band {k}: {err}");
+        }
+        let back = p.collapse_with(Border::Periodic);
+        assert!((&back - &x).mapv(f64::abs).fold(0.0f64, |m, &v| m.max(v)) < 1e-12);
+        // Mirrored borders do know: the same shift changes the finest band near the edges.
+        let (m, n) = (
+            Pyramid::decompose(&x, levels),
+            Pyramid::decompose(&shifted, levels),
+        );
+        assert!((m.bands[0][(0, 0)] - n.bands[0][(h - 8, w - 16)]).abs() > 1e-6);
     }
 
     #[test]

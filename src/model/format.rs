@@ -11,7 +11,9 @@ use super::material::{
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
-use crate::decompose::colour_transfer::{ColourMarginals, Coupling, DIRECTIONS, LIGHTNESS_BINS};
+use crate::decompose::colour_transfer::{
+    CHROMA_LEVELS, ChromaSpread, ColourMarginals, Coupling, DIRECTIONS, LIGHTNESS_BINS,
+};
 use crate::decompose::marginals::{BAND_QUANTILES, QUANTILES, QuantileGrid};
 use crate::decompose::{ColourSpace, KlBasis};
 use crate::geometry::lattice::Lattice;
@@ -28,8 +30,9 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// files (no exemplar chroma), version 6 files (no chroma-lightness coupling), version 7
 /// files (no lit lightness tables), version 8 files (exemplar L* deviations always 8-bit),
 /// version 9 files (no cast shadows), version 10 files (an exemplar's coarse variation
-/// always the MRF's) and version 11 files (no light lightness tables) are still read.
-pub const VERSION: u16 = 12;
+/// always the MRF's), version 11 files (no light lightness tables) and version 12 files (no
+/// chroma spreads) are still read.
+pub const VERSION: u16 = 13;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -333,6 +336,13 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
     for coupling in couplings.into_iter().flatten() {
         w.f32s(&coupling.concat());
     }
+    // Version 13: how many chroma bands every subspace keeps the spread of (0: none), then
+    // each subspace's (a*, b*) spread per band (`MaterialModel::new` makes the counts equal).
+    let spreads = chroma_spreads(model);
+    w.u8(spreads.first().map_or(0, |s| s.len() as u8));
+    for spread in spreads {
+        w.f32s(&spread.concat());
+    }
     match model.exemplar() {
         None => w.u8(0),
         Some(e) => {
@@ -469,11 +479,37 @@ pub fn exemplar_bytes(model: &MaterialModel) -> usize {
     })
 }
 
-/// Bytes the joint colour tables take in the file (0 without them).
+/// Every subspace's chroma spread, or none when a subspace has none (colour tables without a
+/// spread are read from files before version 13).
+fn chroma_spreads(model: &MaterialModel) -> Vec<&ChromaSpread> {
+    model
+        .subspaces()
+        .iter()
+        .map(|s| s.colour_marginals.as_ref()?.chroma_spread.as_ref())
+        .collect::<Option<Vec<_>>>()
+        .unwrap_or_default()
+}
+
+/// Bytes the joint colour tables, their chroma-lightness coupling and their chroma spreads
+/// take in the file (0 without them).
 pub fn colour_marginal_bytes(model: &MaterialModel) -> usize {
-    let subspaces = model.subspaces();
-    if subspaces.iter().all(|s| s.colour_marginals.is_some()) {
-        subspaces.len() * DIRECTIONS * TABLE_BYTES
+    let colours = model
+        .subspaces()
+        .iter()
+        .filter_map(|s| s.colour_marginals.as_ref());
+    let floats: usize = colours
+        .map(|c| {
+            let coupling = c.coupling.map_or(0, |_| 2 * LIGHTNESS_BINS);
+            let spread = c.chroma_spread.as_ref().map_or(0, |s| 2 * s.len());
+            coupling + spread
+        })
+        .sum();
+    if model
+        .subspaces()
+        .iter()
+        .all(|s| s.colour_marginals.is_some())
+    {
+        model.subspaces().len() * DIRECTIONS * TABLE_BYTES + 4 * floats
     } else {
         0
     }
@@ -945,8 +981,8 @@ fn read_table(r: &mut Reader, count: usize, what: &str) -> Parse<Vec<f64>> {
     Ok(table)
 }
 
-/// Reads the version 3 joint colour tables and the version 7 chroma-lightness coupling (see
-/// [`write_colour`]) into the subspace models.
+/// Reads the version 3 joint colour tables, the version 7 chroma-lightness coupling and the
+/// version 13 chroma spreads (see [`write_colour`]) into the subspace models.
 fn read_colour_marginals(
     r: &mut Reader,
     subspaces: &mut [SubspaceModel],
@@ -956,8 +992,17 @@ fn read_colour_marginals(
     let coupled = |r: &mut Reader| -> Parse<bool> {
         Ok(version >= 7 && r.u8_at_most(usize::from(count > 0), "coupling flag")? == 1)
     };
+    let spread_bands = |r: &mut Reader| -> Parse<usize> {
+        let most = if count > 0 { CHROMA_LEVELS } else { 0 };
+        Ok(if version >= 13 {
+            usize::from(r.u8_at_most(most, "chroma band count")?)
+        } else {
+            0
+        })
+    };
     if count == 0 {
         coupled(r)?;
+        spread_bands(r)?;
         return Ok(());
     }
     if count != DIRECTIONS {
@@ -977,6 +1022,7 @@ fn read_colour_marginals(
         s.colour_marginals = Some(ColourMarginals {
             tables,
             coupling: None,
+            chroma_spread: None,
         });
     }
     if coupled(r)? {
@@ -987,6 +1033,15 @@ fn read_colour_marginals(
         {
             if let Some(c) = &mut s.colour_marginals {
                 c.coupling = Some(std::array::from_fn(|k| [v[2 * k], v[2 * k + 1]]));
+            }
+        }
+    }
+    let bands = spread_bands(r)?;
+    if bands > 0 {
+        let values = r.f32s(subspaces.len() * 2 * bands)?;
+        for (s, v) in subspaces.iter_mut().zip(values.chunks_exact(2 * bands)) {
+            if let Some(c) = &mut s.colour_marginals {
+                c.chroma_spread = Some(v.chunks_exact(2).map(|p| [p[0], p[1]]).collect());
             }
         }
     }

