@@ -804,9 +804,10 @@ fn coarse_spread(plane: &ndarray::Array2<f64>, sigma: f64) -> f64 {
 /// coarser chroma: on the generator's float images the chroma blurred at 4 px varied 1.57x
 /// (a*) and 1.68x (b*) as much as the measured; from the JPEG frames of `btfmrf generate` (as
 /// `models/leather.btfm` is made) about 4x. The chroma spreads (format version 13) scale each
-/// of the chroma's pyramid bands to the measured spread within the transfer: now 1.16x and
-/// 1.16x. The bound is the 25 % for the chroma's spread, either way. (At 12 px the
-/// chroma still spreads 1.3x the measured, as the L* does, which the chroma follows.)
+/// of the chroma's pyramid bands to the measured spread within the transfer: now 1.17x and
+/// 1.17x. The bound is the 25 % for the chroma's spread, either way. (At 12 px the
+/// chroma spread 1.3x the measured with the first version of the scaling, as the L* did,
+/// which the chroma follows.)
 #[test]
 fn an_enlarged_leather_has_the_measured_chroma_at_coarse_scales() {
     let btf = Btf::synthetic(SyntheticMaterial::Leather, 128, 5).unwrap();

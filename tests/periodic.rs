@@ -112,9 +112,10 @@ fn periodic_models_round_trip_and_synthesize_the_same_after_writing() {
     assert_eq!(format::to_bytes(&back), bytes);
     // Parameters are held as the file stores them, so what is synthesized differs only by
     // the single-precision rounding of the MRF parameters (as for a model without the part),
-    // which the synthesis amplifies to at most a few thousandths: under one 8-bit level
-    // (measured 0.00007 with the part, 0.0016 without; the subspace images of the model
-    // without it moved by up to 0.0021 before photometric stereo's refits, 0.0015 after).
+    // which the synthesis amplifies to at most a few thousandths of linear RGB, one or two
+    // 8-bit levels at mid-grey (measured 0.00012 with the part, 0.0052 without; 0.0016
+    // without before the chroma spreads, whose extra pass of the colour transfer amplifies
+    // it: 0.0021 without that pass).
     let worst = |m: &MaterialModel| {
         let again = format::from_bytes(&format::to_bytes(m), Path::new("m.btfm")).unwrap();
         let (a, b) = (image(m, 48, true), image(&again, 48, true));
@@ -124,7 +125,7 @@ fn periodic_models_round_trip_and_synthesize_the_same_after_writing() {
     };
     let (with, without) = (worst(&knit), worst(&model(SyntheticMaterial::Knit, false)));
     println!("largest change by writing: {with} with the part, {without} without");
-    assert!(with <= 3e-3 && without <= 3e-3, "{with} {without}");
+    assert!(with <= 6e-3 && without <= 6e-3, "{with} {without}");
     let part = format::periodic_bytes(&knit);
     println!(
         "knit model {} bytes, periodic part {part} bytes",

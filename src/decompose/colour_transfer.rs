@@ -22,11 +22,6 @@ pub const DIRECTIONS: usize = 3 * ROTATIONS;
 /// Passes over the rotations at synthesis (the transfer converges in a few).
 const PASSES: usize = 3;
 
-/// Rounds of band scaling and marginal matching per [`ColourMarginals::respread_chroma`]: the
-/// matching stretches the scaled bands back part of the way (the leather's coarse chroma bands
-/// ended 1.2-1.4x the measured spread after one round, within 8 % after three).
-const SPREAD_ROUNDS: usize = 3;
-
 /// Unit quaternions (w, x, y, z) of the three fixed rotations: axes far from the colour axes
 /// and from each other, angles of 50 to 70 degrees.
 const QUATERNIONS: [[f64; 4]; 3] = [
@@ -156,12 +151,14 @@ fn spread_bands(bands: usize, rest: usize) -> usize {
     }
 }
 
-/// The [`ChromaSpread`] of colour planes.
+/// The [`ChromaSpread`] of colour planes, in single precision as the model file holds it (a
+/// model synthesizes the same before and after writing).
 fn chroma_spread_of(planes: &[Array2<f64>; 3]) -> ChromaSpread {
     let [a, b] = [1, 2].map(|c| Pyramid::decompose(&planes[c], CHROMA_LEVELS));
     let rest = a.bands.last().map_or(0, Array2::len);
+    let single = |band: &Array2<f64>| f64::from(spread(band) as f32);
     (0..spread_bands(a.bands.len(), rest))
-        .map(|k| [spread(&a.bands[k]), spread(&b.bands[k])])
+        .map(|k| [single(&a.bands[k]), single(&b.bands[k])])
         .collect()
 }
 
@@ -211,7 +208,8 @@ impl ColourMarginals {
         Self {
             tables,
             coupling: Some(coupling_of(planes)),
-            chroma_spread: Some(chroma_spread_of(planes)),
+            // An image too small for one band keeps none (a model file has no empty spread).
+            chroma_spread: Some(chroma_spread_of(planes)).filter(|s| !s.is_empty()),
         }
     }
 
@@ -234,7 +232,7 @@ impl ColourMarginals {
     /// Moves the colours of `planes` towards these marginals: the coupling first
     /// ([`ColourMarginals::couple`]), then [`PASSES`] passes over the rotations, each axis
     /// matched in turn, the colour axes last; with a [`ChromaSpread`], the chroma's bands are
-    /// scaled to it after each pass and one more pass follows. `border`: how the planes continue
+    /// scaled to it between passes and one more pass follows. `border`: how the planes continue
     /// beyond their edges ([`Border::Periodic`] for a tileable synthesis).
     ///
     /// Each rotation is one pass over the pixels, in place; its three maps come from the
@@ -242,13 +240,16 @@ impl ColourMarginals {
     /// [`quantiles_at`](crate::decompose::marginals::quantiles_at) takes of a plane.
     pub fn transfer(&self, planes: &mut [Array2<f64>; 3], border: Border) {
         self.couple(planes);
-        for _ in 0..PASSES {
+        for pass in 0..PASSES {
             self.slide(planes);
-            self.respread_chroma(planes, border);
+            if pass + 1 < PASSES {
+                self.respread_chroma(planes, border);
+            }
         }
-        // The band scaling loosens the chroma's dependence on L*: a last pass restores it
-        // (without it the leather's synthesis left the measured chromaticities in up to 3 % of
-        // its pixels, against none).
+        // The band scaling loosens the chroma's dependence on L*: one more pass restores it.
+        // Without it a leather representative's synthesis left the measured chromaticities in
+        // more of its pixels than analysis allows (0.6 %), and analysis gave it up for a worse
+        // one (structure x1.05 -> x1.11 the another-crop level, seed 1).
         if self.chroma_spread.is_some() {
             self.slide(planes);
         }
@@ -284,9 +285,9 @@ impl ColourMarginals {
         }
     }
 
-    /// Scales each band of the chroma planes' pyramid that has a measured spread towards it (by
-    /// at most [`MAX_CHROMA_GAIN`]), then matches their marginals again, [`SPREAD_ROUNDS`]
-    /// times; L* is left as it is. Nothing without a [`ChromaSpread`].
+    /// Scales each band of the chroma planes' pyramid that has a measured spread to it (by at
+    /// most [`MAX_CHROMA_GAIN`]); L* is left as it is, and the marginals to the passes that
+    /// follow. Nothing without a [`ChromaSpread`].
     fn respread_chroma(&self, planes: &mut [Array2<f64>; 3], border: Border) {
         let Some(measured) = &self.chroma_spread else {
             return;
@@ -298,28 +299,23 @@ impl ColourMarginals {
             Border::Periodic => exact_levels(rows, cols, CHROMA_LEVELS),
             Border::Mirror => CHROMA_LEVELS,
         };
-        let probabilities = band_probabilities();
         let respread = |plane: &mut Array2<f64>, c: usize| {
-            for _ in 0..SPREAD_ROUNDS {
-                let mut pyramid = Pyramid::decompose_with(plane, levels, border);
-                let bands = pyramid.bands.len();
-                let scaled = if bands == CHROMA_LEVELS {
-                    bands
-                } else {
-                    bands - 1
-                };
-                for (band, want) in pyramid.bands[..scaled].iter_mut().zip(measured) {
-                    // About the band's mean: the coarse rest keeps the plane's mean.
-                    let (mean, have) = (band.mean().unwrap_or(0.0), spread(band));
-                    if have > 1e-9 {
-                        let gain = (want[c] / have).min(MAX_CHROMA_GAIN);
-                        band.mapv_inplace(|v| mean + gain * (v - mean));
-                    }
+            let mut pyramid = Pyramid::decompose_with(plane, levels, border);
+            let bands = pyramid.bands.len();
+            let scaled = if bands == CHROMA_LEVELS {
+                bands
+            } else {
+                bands - 1
+            };
+            for (band, want) in pyramid.bands[..scaled].iter_mut().zip(measured) {
+                // About the band's mean: the coarse rest keeps the plane's mean.
+                let (mean, have) = (band.mean().unwrap_or(0.0), spread(band));
+                if have > 1e-9 {
+                    let gain = (want[c] / have).min(MAX_CHROMA_GAIN);
+                    band.mapv_inplace(|v| mean + gain * (v - mean));
                 }
-                *plane = pyramid.collapse_with(border);
-                let map = MarginalMap::new(plane, &self.tables[1 + c], &probabilities);
-                plane.mapv_inplace(|v| map.apply(v));
             }
+            *plane = pyramid.collapse_with(border);
         };
         let [_, a, b] = planes;
         rayon::join(|| respread(a, 0), || respread(b, 1));
@@ -466,8 +462,11 @@ mod tests {
     #[test]
     fn the_chroma_gets_its_measured_spread_per_scale_not_only_its_marginal() {
         // Measured: chroma mostly pixel-scale. Synthesized: a third of that, and coarse waves
-        // five times the measured ones; the transfer alone makes up the marginal by keeping
-        // the waves strong, the spreads bring each scale to the measured.
+        // five times the measured ones. The transfer alone makes up the marginal by keeping
+        // the waves strong (bands 2-5 at 3.0-5.9x the measured, the finest at 0.43x); the
+        // spreads bring every band within 0.5-1.7x (two scalings between passes: three rounds
+        // of scaling and matching after every pass came within 25 % here, at five times the
+        // cost, and gave the same figures on the built-in materials).
         let measured = chroma_scales(128, 12.0, 1.0, 0);
         let synthesized = chroma_scales(128, 4.0, 5.0, 7);
         let with_spread = ColourMarginals::measure(&measured);
@@ -495,7 +494,7 @@ mod tests {
                 for k in 0..CHROMA_LEVELS {
                     let r = band_ratio(&planes[c], border, &measured[c], k);
                     assert!(
-                        (0.8..1.25).contains(&r),
+                        (0.5..1.7).contains(&r),
                         "{border:?} channel {c} band {k}: {r:.2}"
                     );
                 }

@@ -558,12 +558,13 @@ impl MaterialModel {
                     .map(Vec::len);
                 if spread.map(Vec::len) != first
                     || spread.is_some_and(|s| {
-                        s.len() > CHROMA_LEVELS
+                        s.is_empty()
+                            || s.len() > CHROMA_LEVELS
                             || s.iter().flatten().any(|v| !(v.is_finite() && *v >= 0.0))
                     })
                 {
                     return bad(format!(
-                        "subspace {k}: chroma spreads are not as many bands (at most {CHROMA_LEVELS}) as subspace 0's, or not finite and non-negative"
+                        "subspace {k}: chroma spreads are not as many bands (1 to {CHROMA_LEVELS}) as subspace 0's, or not finite and non-negative"
                     ));
                 }
             }
@@ -991,6 +992,8 @@ mod tests {
         assert!(e.contains("subspace 1: chroma spreads are not"), "{e}");
         let e = refused(coloured([Some(vec![[1.0, 2.0]]), Some(vec![[1.0, -2.0]])]));
         assert!(e.contains("subspace 1: chroma spreads are not"), "{e}");
+        let e = refused(coloured([Some(Vec::new()), Some(Vec::new())]));
+        assert!(e.contains("subspace 0: chroma spreads are not"), "{e}");
         let long = Some(vec![[0.5, 0.5]; CHROMA_LEVELS + 1]);
         let e = refused(coloured([long.clone(), long]));
         assert!(e.contains("subspace 0: chroma spreads are not"), "{e}");
