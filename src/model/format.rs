@@ -322,18 +322,9 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
         }
     }
     // Version 7: the chroma-lightness coupling of every subspace, or a zero flag.
-    let couplings: Option<Vec<&Coupling>> = model
-        .subspaces()
-        .iter()
-        .map(|s| {
-            s.colour_marginals
-                .as_ref()
-                .and_then(|c| c.coupling.as_ref())
-        })
-        .collect::<Option<Vec<_>>>()
-        .filter(|_| with_colours);
-    w.u8(u8::from(couplings.is_some()));
-    for coupling in couplings.into_iter().flatten() {
+    let couplings = couplings(model);
+    w.u8(u8::from(!couplings.is_empty()));
+    for coupling in couplings {
         w.f32s(&coupling.concat());
     }
     // Version 13: how many chroma bands every subspace keeps the spread of (0: none), then
@@ -479,8 +470,19 @@ pub fn exemplar_bytes(model: &MaterialModel) -> usize {
     })
 }
 
-/// Every subspace's chroma spread, or none when a subspace has none (colour tables without a
-/// spread are read from files before version 13).
+/// Every subspace's chroma-lightness coupling as the file holds them: all, or none when a
+/// subspace has none (colour tables without one are read from files before version 7).
+fn couplings(model: &MaterialModel) -> Vec<&Coupling> {
+    model
+        .subspaces()
+        .iter()
+        .map(|s| s.colour_marginals.as_ref()?.coupling.as_ref())
+        .collect::<Option<Vec<_>>>()
+        .unwrap_or_default()
+}
+
+/// Every subspace's chroma spread as the file holds them: all, or none when a subspace has
+/// none (colour tables without a spread are read from files before version 13).
 fn chroma_spreads(model: &MaterialModel) -> Vec<&ChromaSpread> {
     model
         .subspaces()
@@ -490,29 +492,16 @@ fn chroma_spreads(model: &MaterialModel) -> Vec<&ChromaSpread> {
         .unwrap_or_default()
 }
 
-/// Bytes the joint colour tables, their chroma-lightness coupling and their chroma spreads
-/// take in the file (0 without them).
+/// Bytes the joint colour tables, their chroma-lightness couplings and their chroma spreads
+/// take in the file, as [`write_colour`] writes them (0 without tables).
 pub fn colour_marginal_bytes(model: &MaterialModel) -> usize {
-    let colours = model
-        .subspaces()
-        .iter()
-        .filter_map(|s| s.colour_marginals.as_ref());
-    let floats: usize = colours
-        .map(|c| {
-            let coupling = c.coupling.map_or(0, |_| 2 * LIGHTNESS_BINS);
-            let spread = c.chroma_spread.as_ref().map_or(0, |s| 2 * s.len());
-            coupling + spread
-        })
-        .sum();
-    if model
-        .subspaces()
-        .iter()
-        .all(|s| s.colour_marginals.is_some())
-    {
-        model.subspaces().len() * DIRECTIONS * TABLE_BYTES + 4 * floats
-    } else {
-        0
+    let subspaces = model.subspaces();
+    if !subspaces.iter().all(|s| s.colour_marginals.is_some()) {
+        return 0;
     }
+    let coupling_floats = couplings(model).len() * 2 * LIGHTNESS_BINS;
+    let spread_floats: usize = chroma_spreads(model).iter().map(|s| 2 * s.len()).sum();
+    subspaces.len() * DIRECTIONS * TABLE_BYTES + 4 * (coupling_floats + spread_floats)
 }
 
 /// Ranges narrower than this are written as flat tables: heights in texels and factor
