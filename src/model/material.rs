@@ -540,6 +540,13 @@ impl MaterialModel {
                 ));
             }
             if let Some(c) = &s.colour_marginals {
+                let first = parts.subspaces[0].colour_marginals.as_ref();
+                // A file holds couplings for every subspace or for none (format::couplings).
+                if c.coupling.is_some() != first.is_some_and(|f| f.coupling.is_some()) {
+                    return bad(format!(
+                        "subspace {k}: a chroma-lightness coupling where subspace 0 has none, or none where it has one"
+                    ));
+                }
                 if c.coupling
                     .iter()
                     .flatten()
@@ -551,11 +558,7 @@ impl MaterialModel {
                     ));
                 }
                 let spread = c.chroma_spread.as_ref();
-                let first = parts.subspaces[0]
-                    .colour_marginals
-                    .as_ref()
-                    .and_then(|c| c.chroma_spread.as_ref())
-                    .map(Vec::len);
+                let first = first.and_then(|c| c.chroma_spread.as_ref()).map(Vec::len);
                 if spread.map(Vec::len) != first
                     || spread.is_some_and(|s| {
                         s.is_empty()
@@ -814,7 +817,7 @@ mod tests {
     use super::*;
     use crate::btf::Direction;
     use crate::decompose::ColourSpace;
-    use crate::decompose::colour_transfer::LIGHTNESS_BINS;
+    use crate::decompose::colour_transfer::{Coupling, LIGHTNESS_BINS};
     use crate::decompose::marginals::QUANTILES;
     use crate::mrf::{BandModel, Car2dModel, Car3dModel, GmrfModel, Levels};
 
@@ -1000,12 +1003,37 @@ mod tests {
         let mut spread = parts();
         coloured([Some(vec![[1.0, 2.0]]), Some(vec![[3.0, 0.0]])])(&mut spread);
         assert!(MaterialModel::new(spread).is_ok());
-        let e = refused(|p| {
-            coloured([None, None])(p);
-            p.subspaces[1].colour_marginals.as_mut().unwrap().coupling =
-                Some([[f64::INFINITY, 0.0]; LIGHTNESS_BINS]);
-        });
-        assert!(e.contains("subspace 1: a chroma-lightness coupling"), "{e}");
+        // Couplings: every subspace or none (the file's layout), each finite.
+        let coupled = |couplings: [Option<Coupling>; 2]| {
+            move |p: &mut MaterialParts| {
+                coloured([None, None])(p);
+                for (s, coupling) in p.subspaces.iter_mut().zip(couplings) {
+                    s.colour_marginals.as_mut().unwrap().coupling = coupling;
+                }
+            }
+        };
+        let even = Some([[0.5, -0.5]; LIGHTNESS_BINS]);
+        let e = refused(coupled([None, even]));
+        assert!(
+            e.contains("subspace 1: a chroma-lightness coupling where"),
+            "{e}"
+        );
+        let e = refused(coupled([even, None]));
+        assert!(
+            e.contains("subspace 1: a chroma-lightness coupling where"),
+            "{e}"
+        );
+        let mut both = parts();
+        coupled([even, even])(&mut both);
+        assert!(MaterialModel::new(both).is_ok());
+        let e = refused(coupled([
+            even,
+            Some([[f64::INFINITY, 0.0]; LIGHTNESS_BINS]),
+        ]));
+        assert!(
+            e.contains("subspace 1: a chroma-lightness coupling is not finite"),
+            "{e}"
+        );
         let lit = LitMarginals {
             lightness: table.clone(),
         };
