@@ -10,7 +10,9 @@
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
 //! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--no-light-tables] [--verbose]
 //! [--sheet DIR] [--seed N] [--pair-rank K] [--shadows attached|cast|auto]
-//! [--coarse laid|mrf|auto] [--halfway]`; `--halfway` judges at nine lights halfway between
+//! [--coarse laid|mrf|auto] [--view N] [--halfway]`; `--view N` judges in the Bonn set's
+//! view N instead of the frontal view 0 (1-6 at 15 degrees, 7-18 at 30, 19-36 at 45, 37-60 at
+//! 60, 61-80 at 75; not with `--halfway`); `--halfway` judges at nine lights halfway between
 //! measured ones instead, the references rendered there by the generator (what the model does
 //! between its measured lights); `--shadows` sets the range map's shadows and `--coarse` where
 //! the exemplar's coarse variation comes from (default for both: auto, analysis chooses); `--seed` sets the synthesis seed (default 1;
@@ -195,6 +197,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut verbose = false;
     let mut rank: Option<usize> = None;
     let mut seed = 1;
+    let mut dv = 0;
     let mut halfway = false;
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -228,10 +231,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--verbose" => verbose = true,
             "--halfway" => halfway = true,
             "--seed" => seed = args.next().ok_or("--seed N")?.parse()?,
+            "--view" => dv = args.next().ok_or("--view N")?.parse()?,
             "--pair-rank" => rank = Some(args.next().ok_or("--pair-rank K")?.parse()?),
             "--sheet" => sheet = Some(args.next().ok_or("--sheet DIR")?.into()),
             m => materials.push(m.parse::<SyntheticMaterial>()?),
         }
+    }
+    if halfway && dv != 0 {
+        return Err("--view judges at measured lights: not with --halfway".into());
     }
     if materials.is_empty() {
         materials = SyntheticMaterial::ALL.to_vec();
@@ -251,7 +258,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let other_material = SyntheticMaterial::ALL[(i + 1) % 4];
         let other = Btf::synthetic(other_material, 128, 5)?;
         let (model, _) = analyze(&btf, &options, &NoProgress)?;
-        let view = *btf.views().get(0).ok_or("no view")?;
+        let view = *btf
+            .views()
+            .get(dv)
+            .ok_or("--view: no such view in the Bonn set")?;
         // The references halfway between measured lights, rendered by the generator.
         let between = |m: SyntheticMaterial,
                        seed: u64|
@@ -293,11 +303,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         .ok_or("light not in the Bonn set")?,
                 ),
             };
-            let measured = sets.0.image(0, l)?;
+            let measured = sets.0.image(dv, l)?;
             let y = Yardstick::from_samples(
                 &measured,
-                &sets.1.image(0, l)?,
-                Some(&sets.2.image(0, l)?),
+                &sets.1.image(dv, l)?,
+                Some(&sets.2.image(dv, l)?),
                 1,
             )?;
             let mut image = model.image_from_cache(&cache, &view, &light)?;
