@@ -1170,9 +1170,10 @@ const LATTICE_EXEMPLAR_SIDE: usize = 96;
 /// How much an oblique view's crop counts in the exemplar's mean and deviations, a crop of
 /// the registered view counting 1. An oblique crop is rectified and keeps its own shading,
 /// parallax and resampling, which the basis then spends deviations on and lends every other
-/// subspace. Measured (issue 11, nine frontal lights, seeds 1-4, x the
-/// another-crop level, sponge / stones / leather / knit): counted fully 1.36 / 1.65 / 1.11 /
-/// 4.28; a quarter 1.34 / 1.51 / 1.08 / 4.26; not at all 1.33 / 1.45 / 1.10 / 4.04.
+/// subspace. Measured (issue 11, nine frontal lights, seeds 1-4, x the another-crop level,
+/// sponge / stones / leather / knit): counted fully 1.36 / 1.65 / 1.11 / 4.28, a quarter 1.34 /
+/// 1.51 / 1.07 / 4.35. Not counted at all was better still there (about 1.33 / 1.45 / 1.10 /
+/// 4.04), but the leather in oblique views lost about 15 % (docs/BENCHMARKS.md).
 const OBLIQUE_CROP_COUNT: f64 = 0.25;
 
 /// The fitted subspaces' exemplar crops (those that have one) and, for each, whether its
@@ -1505,7 +1506,7 @@ mod tests {
     #[test]
     fn only_the_counted_fields_make_the_mean_and_the_deviations() {
         // Three registered crops vary along one pattern; a fourth (an oblique view's) adds a
-        // pattern of its own. Marked out, it is projected on the basis and adds nothing to it.
+        // pattern of its own. Uncounted, it is projected on the basis and adds nothing to it.
         let base = |i: usize| 40.0 + ((i * 7 % 11) as f64);
         let along = |i: usize| ((i * 5 % 13) as f64) - 6.0;
         let own = |i: usize| if i.is_multiple_of(2) { 9.0 } else { -9.0 };
