@@ -1168,9 +1168,9 @@ const LATTICE_EXEMPLAR_BUDGET: usize = 32 << 10;
 const LATTICE_EXEMPLAR_SIDE: usize = 96;
 
 /// How much an oblique view's crop counts in the exemplar's mean and deviations, a crop of
-/// the registered view counting 1. An oblique crop is rectified and keeps its own shading,
-/// parallax and resampling, which the basis then spends deviations on and lends every other
-/// subspace. Measured (issue 11, nine frontal lights, seeds 1-4, x the another-crop level,
+/// the registered view counting 1. An oblique crop is rectified and keeps its own parallax,
+/// resampling and (off a lattice, where only the registered view is de-shaded) shading, which
+/// the basis then spends deviations on and lends every other subspace. Measured (issue 11, nine frontal lights, seeds 1-4, x the another-crop level,
 /// sponge / stones / leather / knit): counted fully 1.36 / 1.65 / 1.11 / 4.28, a quarter 1.34 /
 /// 1.51 / 1.07 / 4.35. Not counted at all was better still there (about 1.33 / 1.45 / 1.10 /
 /// 4.04), but the leather in oblique views lost about 15 % (docs/BENCHMARKS.md).
