@@ -479,7 +479,7 @@ pub fn analyze(
             }
         }
     }
-    let (crops, registered_crops) = exemplar_crops(&fitted, frontal);
+    let (crops, crop_counts) = exemplar_crops(&fitted, frontal, periodic.is_some());
     let mut subspaces = Vec::with_capacity(fitted.len());
     let mut shares = Vec::with_capacity(fitted.len());
     for (s, notes, share, _) in fitted {
@@ -489,7 +489,7 @@ pub fn analyze(
     }
     let exemplar = exemplar_from(
         &crops,
-        (&registered_crops, oblique_crop_count(periodic.is_some())),
+        &crop_counts,
         ExemplarBudget::for_lattice(periodic.is_some()),
     );
     report.warnings.extend(stationarity_warning(shares));
@@ -752,7 +752,7 @@ fn off_chroma_shares(
         .map(|l| btf.image(view, l))
         .collect::<std::result::Result<Vec<_>, _>>()?;
     let support = crate::eval::artefacts::ChromaSupport::new(&images);
-    let (crops, registered) = exemplar_crops(fitted, geometry::frontal_view(btf));
+    let (crops, counts) = exemplar_crops(fitted, geometry::frontal_view(btf), periodic.is_some());
     let probe = MaterialModel::new(MaterialParts {
         views: btf.views().clone(),
         lights: btf.lights().clone(),
@@ -764,7 +764,7 @@ fn off_chroma_shares(
         // The exemplar as it would be stored (its L* detail moves pixels' chromaticity too).
         exemplar: exemplar_from(
             &crops,
-            (&registered, oblique_crop_count(periodic.is_some())),
+            &counts,
             ExemplarBudget::for_lattice(periodic.is_some()),
         ),
         periodic: periodic.cloned(),
@@ -1170,13 +1170,14 @@ const LATTICE_EXEMPLAR_SIDE: usize = 96;
 /// How much an oblique view's crop counts in the exemplar's mean and deviations, a crop of
 /// the registered view counting 1. An oblique crop is rectified and keeps its own parallax,
 /// resampling and (off a lattice, where only the registered view is de-shaded) shading, which
-/// the basis then spends deviations on and lends every other subspace. Measured (issue 11, nine frontal lights, seeds 1-4, x the another-crop level,
-/// sponge / stones / leather / knit): counted fully 1.36 / 1.65 / 1.11 / 4.28, a quarter 1.34 /
-/// 1.51 / 1.07 / 4.35. Not counted at all was better still there (about 1.33 / 1.45 / 1.10 /
-/// 4.04), but the leather in oblique views lost about 15 % (docs/BENCHMARKS.md).
+/// the basis then spends deviations on and lends every other subspace. Measured (issue 11,
+/// nine frontal lights, seeds 1-4, x the another-crop level, sponge / stones / leather / knit):
+/// counted fully 1.36 / 1.65 / 1.11 / 4.28, a quarter 1.34 / 1.51 / 1.07 / 4.35. Not counted at
+/// all was better still there (about 1.33 / 1.45 / 1.10 / 4.04), but the leather in oblique
+/// views lost about 15 % (docs/BENCHMARKS.md).
 const OBLIQUE_CROP_COUNT: f64 = 0.25;
 
-/// How much an oblique view's crop counts in the exemplar ([`exemplar_from`]):
+/// How much an oblique view's crop counts in the exemplar ([`exemplar_crops`]):
 /// [`OBLIQUE_CROP_COUNT`], or nothing on a lattice. There every view is de-shaded, and the
 /// knit judged closer with the oblique crops only projected (seeds 1-4, x the another-crop
 /// level, a quarter -> nothing: measured lights 4.35 -> 4.13, halfway 4.11 -> 3.98; view 10,
@@ -1185,14 +1186,25 @@ fn oblique_crop_count(lattice: bool) -> f64 {
     if lattice { 0.0 } else { OBLIQUE_CROP_COUNT }
 }
 
-/// The fitted subspaces' exemplar crops (those that have one) and, for each, whether its
-/// representative is in view `registered_view` (the view the range map is registered with).
-fn exemplar_crops(fitted: &[Fitted], registered_view: usize) -> (Vec<[Array2<f64>; 3]>, Vec<bool>) {
+/// The fitted subspaces' exemplar crops (those that have one) and how much each counts in
+/// the exemplar's mean and deviations: 1 where its representative is in view
+/// `registered_view` (the view the range map is registered with), else
+/// [`oblique_crop_count`] of `lattice`.
+fn exemplar_crops(
+    fitted: &[Fitted],
+    registered_view: usize,
+    lattice: bool,
+) -> (Vec<[Array2<f64>; 3]>, Vec<f64>) {
     fitted
         .iter()
         .filter_map(|(s, _, _, crop)| {
             let registered = usize::from(s.representative.0) == registered_view;
-            Some((crop.clone()?, registered))
+            let count = if registered {
+                1.0
+            } else {
+                oblique_crop_count(lattice)
+            };
+            Some((crop.clone()?, count))
         })
         .unzip()
 }
@@ -1201,18 +1213,13 @@ fn exemplar_crops(fitted: &[Fitted], registered_view: usize) -> (Vec<[Array2<f64
 /// the mean and principal deviations of their L* within the budget, and where the budget keeps
 /// chroma, of their chroma at [`chroma_step`] blocks, with each subspace's weights.
 ///
-/// The crops `registered` marks (representatives in the view the range map is registered
-/// with) count fully in the mean and the deviations, the others `oblique` (see
-/// [`oblique_crop_count`]); every crop is projected on them.
+/// Each crop counts `counts` in the mean and the deviations ([`exemplar_crops`]); every crop
+/// is projected on them.
 fn exemplar_from(
     crops: &[[Array2<f64>; 3]],
-    (registered, oblique): (&[bool], f64),
+    counts: &[f64],
     budget: ExemplarBudget,
 ) -> Option<Exemplar> {
-    let counts: Vec<f64> = registered
-        .iter()
-        .map(|&r| if r { 1.0 } else { oblique })
-        .collect();
     let (rows, cols) = crops.first()?[0].dim();
     let step = chroma_step(rows, cols);
     let (chroma_rows, chroma_cols) = (rows.div_ceil(step), cols.div_ceil(step));
@@ -1240,7 +1247,7 @@ fn exemplar_from(
             cols: chroma_cols,
             fields: principal(
                 &fields,
-                Some(&counts),
+                Some(counts),
                 (
                     deviations(
                         chroma_budget,
@@ -1257,7 +1264,7 @@ fn exemplar_from(
         cols,
         lightness: principal(
             &lightness,
-            Some(&counts),
+            Some(counts),
             (
                 deviations(budget.lightness, (field, field.div_ceil(2))),
                 EXEMPLAR_RESIDUAL,

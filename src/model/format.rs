@@ -470,26 +470,30 @@ pub fn exemplar_bytes(model: &MaterialModel) -> usize {
     })
 }
 
-/// Every subspace's chroma-lightness coupling as the file holds them: all, or none when a
-/// subspace has none (colour tables without one are read from files before version 7).
-fn couplings(model: &MaterialModel) -> Vec<&Coupling> {
+/// One optional part of every subspace's colour tables (`part`: the chroma-lightness
+/// coupling, the chroma spread) as the file holds it: for all subspaces, or for none when one
+/// lacks it (colour tables without a coupling are read from files before version 7, without a
+/// spread from files before version 13).
+fn colour_parts<'a, T>(
+    model: &'a MaterialModel,
+    part: impl Fn(&'a ColourMarginals) -> Option<&'a T>,
+) -> Vec<&'a T> {
     model
         .subspaces()
         .iter()
-        .map(|s| s.colour_marginals.as_ref()?.coupling.as_ref())
+        .map(|s| part(s.colour_marginals.as_ref()?))
         .collect::<Option<Vec<_>>>()
         .unwrap_or_default()
 }
 
-/// Every subspace's chroma spread as the file holds them: all, or none when a subspace has
-/// none (colour tables without a spread are read from files before version 13).
+/// Every subspace's chroma-lightness coupling, or none ([`colour_parts`]).
+fn couplings(model: &MaterialModel) -> Vec<&Coupling> {
+    colour_parts(model, |c| c.coupling.as_ref())
+}
+
+/// Every subspace's chroma spread, or none ([`colour_parts`]).
 fn chroma_spreads(model: &MaterialModel) -> Vec<&ChromaSpread> {
-    model
-        .subspaces()
-        .iter()
-        .map(|s| s.colour_marginals.as_ref()?.chroma_spread.as_ref())
-        .collect::<Option<Vec<_>>>()
-        .unwrap_or_default()
+    colour_parts(model, |c| c.chroma_spread.as_ref())
 }
 
 /// Bytes the joint colour tables, their chroma-lightness couplings and their chroma spreads
