@@ -7,7 +7,8 @@
 //! and over the another-crop level, and the mean colour distance.
 //!
 //! Run: `cargo run --release --example judge_captures -- CAPTURE... [--clusters N]
-//! [--model KIND] [--no-lit-tables] [--no-light-tables]`, e.g. `../shared/data/rti/*`.
+//! [--model KIND] [--no-lit-tables] [--no-light-tables] [--exemplar N]`, e.g.
+//! `../shared/data/rti/*`; `--exemplar N` sets the exemplar's side (0: none).
 
 use btfmrf::analysis::{AnalysisOptions, analyze};
 use btfmrf::btf::Btf;
@@ -31,6 +32,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--model" => options.kind = args.next().ok_or("--model KIND")?.parse()?,
             "--no-lit-tables" => options.lit_matching = false,
             "--no-light-tables" => options.light_tables = false,
+            "--exemplar" => {
+                options.exemplar_side = Some(args.next().ok_or("--exemplar N")?.parse()?)
+            }
             path => captures.push(path.to_string()),
         }
     }

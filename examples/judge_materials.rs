@@ -15,7 +15,10 @@
 //! 60, 61-80 at 75; not with `--halfway`); `--halfway` judges at nine lights halfway between
 //! measured ones instead, the references rendered there by the generator (what the model does
 //! between its measured lights); `--shadows` sets the range map's shadows and `--coarse` where
-//! the exemplar's coarse variation comes from (default for both: auto, analysis chooses); `--seed` sets the synthesis seed (default 1;
+//! the exemplar's coarse variation comes from (default for both: auto, analysis chooses);
+//! `--size N` generates the materials at N^2 (default 128), `--enlarge F` synthesizes F times
+//! that side (judged against the measured size; the sheet shows the enlargement's first
+//! N^2), `--exemplar N` sets the exemplar's side (0: none); `--seed` sets the synthesis seed (default 1;
 //! one seed's figures move by about 0.1-0.3 crop levels from seed to seed); `--pair-rank K` is
 //! an experiment: every judged image gets the L* table of its own light rebuilt from the mean
 //! and K principal components (8-bit coefficients) of the tables of all frontal lights, as
@@ -199,6 +202,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut seed = 1;
     let mut dv = 0;
     let mut halfway = false;
+    let mut size: u32 = 128;
+    let mut enlarge: u32 = 1;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--clusters" => options.clusters = args.next().ok_or("--clusters N")?.parse()?,
@@ -231,6 +236,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--verbose" => verbose = true,
             "--halfway" => halfway = true,
             "--seed" => seed = args.next().ok_or("--seed N")?.parse()?,
+            "--size" => size = args.next().ok_or("--size N")?.parse()?,
+            "--enlarge" => enlarge = args.next().ok_or("--enlarge F")?.parse()?,
+            "--exemplar" => {
+                options.exemplar_side = Some(args.next().ok_or("--exemplar N")?.parse()?)
+            }
             "--view" => dv = args.next().ok_or("--view N")?.parse()?,
             "--pair-rank" => rank = Some(args.next().ok_or("--pair-rank K")?.parse()?),
             "--sheet" => sheet = Some(args.next().ok_or("--sheet DIR")?.into()),
@@ -253,10 +263,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .iter()
             .position(|&m| m == material)
             .ok_or("unknown material")?;
-        let btf = Btf::synthetic(material, 128, 5)?;
-        let another = Btf::synthetic(material, 128, 6)?;
+        let btf = Btf::synthetic(material, size, 5)?;
+        let another = Btf::synthetic(material, size, 6)?;
         let other_material = SyntheticMaterial::ALL[(i + 1) % 4];
-        let other = Btf::synthetic(other_material, 128, 5)?;
+        let other = Btf::synthetic(other_material, size, 5)?;
         let (model, _) = analyze(&btf, &options, &NoProgress)?;
         let view = *btf
             .views()
@@ -269,7 +279,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let views = DirectionSet::new(vec![view])?;
             let lights =
                 DirectionSet::new(HALFWAY.iter().map(|&(t, p)| Direction::new(t, p)).collect())?;
-            Ok(SyntheticBtf::with_directions(m, 128, seed, &views, &lights)?.into_btf())
+            Ok(SyntheticBtf::with_directions(m, size, seed, &views, &lights)?.into_btf())
         };
         let references = if halfway {
             Some((
@@ -281,8 +291,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             None
         };
         let o = SynthesisOptions {
-            rows: 128,
-            cols: 128,
+            rows: (size * enlarge) as usize,
+            cols: (size * enlarge) as usize,
             seed,
             tileable: false,
         };
@@ -384,7 +394,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             log_ratio += v.structure_vs_crop.ln();
             colour += v.judgement.colour_lab;
             measured_row.push(measured);
-            synthesized_row.push(image);
+            // The sheet sets an enlargement's first measured-size corner beside the measured.
+            synthesized_row.push(
+                image
+                    .slice(s![.., ..size as usize, ..size as usize])
+                    .to_owned(),
+            );
         }
         let n = judged.len() as f64;
         use btfmrf::model::format;

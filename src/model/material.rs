@@ -113,7 +113,9 @@ pub struct BandMarginals {
 /// ([`crate::geometry::quilt`]), not by repeating it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RangeMap {
-    /// Heights in texels of the measured image, row-major, `rows * cols` samples.
+    /// Heights in texels of the measured image, row-major, `rows * cols` samples: all of the
+    /// image averaged over `step` x `step` blocks, or a window of it at every pixel (`step`
+    /// 1), where an exemplar is cut too.
     pub heights: Vec<f32>,
     /// Rows of the stored map.
     pub rows: usize,

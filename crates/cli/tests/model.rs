@@ -250,9 +250,9 @@ fn cli_analyze_and_synthesize() {
 fn real_rti_sets_analyze_and_synthesize() {
     // (set, kind, file size in KB, fidelity score) as quoted.
     let quoted = [
-        ("loewenkopf", ModelKind::Gmrf, 47.55, 0.906),
-        ("clay-leaf", ModelKind::Car2d, 39.94, 0.780),
-        ("loewenkopf", ModelKind::Car3d, 49.41, 0.953),
+        ("loewenkopf", ModelKind::Gmrf, 47.54, 0.910),
+        ("clay-leaf", ModelKind::Car2d, 71.05, 0.689),
+        ("loewenkopf", ModelKind::Car3d, 49.42, 0.993),
     ];
     let mut misses = Vec::new();
     for (set, kind, kb, score) in quoted {
