@@ -61,11 +61,16 @@ impl OrientedPyramid {
                 (0..orientations)
                     .map(|k| {
                         filtered(&|r, a| {
+                            // Most of the plane lies outside a scale's octave: no angle there.
+                            let radial = band_radial(r, s);
+                            if radial == 0.0 {
+                                return 0.0;
+                            }
                             let c = (a - PI * k as f64 / orientations as f64).cos();
                             // One-sided (analytic): twice the gain on the half plane the band
                             // points to, none on the other; the real part sees the gain itself.
                             let side = if c > 0.0 { 2.0 } else { 0.0 };
-                            band_radial(r, s) * orientation_gain(c, orientations) * side
+                            radial * orientation_gain(c, orientations) * side
                         })
                     })
                     .collect()

@@ -25,7 +25,8 @@ const PATCH_SIDE: (usize, usize) = (6, 64);
 const OVERLAP_DIVISOR: usize = 5;
 /// Candidates whose overlap error is within this factor of the best are equally likely.
 const TOLERANCE: f64 = 1.1;
-/// At most this many candidate offsets per axis are scored (the rest are skipped evenly).
+/// At most this many candidate offsets per axis are scored (the rest are skipped evenly); the
+/// one picked is then refined over the offsets skipped around it ([`refine`]).
 const CANDIDATES_PER_AXIS: usize = 48;
 /// Candidates are first scored on the known samples of every this-many-th patch row ...
 const COARSE_STRIDE: usize = 4;
@@ -1353,7 +1354,10 @@ mod tests {
             5
         );
         // Without a phase: every offset, thinned to the per-axis limit.
-        assert_eq!(candidate_offsets(60, 20, None).spread.len(), 41);
+        let all = candidate_offsets(60, 20, None);
+        let stride = 41usize.div_ceil(CANDIDATES_PER_AXIS);
+        assert_eq!(all.spread.len(), 41usize.div_ceil(stride));
+        assert_eq!((all.count, all.refine), (41, stride / 2));
         // A short period in a long source: the phase's offsets, thinned to the same limit.
         let short = Phase {
             output: [4.0, 4.0],
