@@ -35,26 +35,13 @@ use btfmrf::analysis::{AnalysisOptions, analyze};
 use btfmrf::btf::synthetic::{SyntheticBtf, SyntheticMaterial};
 use btfmrf::btf::{Btf, Direction, DirectionSet};
 use btfmrf::decompose::ColourSpace;
-use btfmrf::eval::Yardstick;
 use btfmrf::eval::montage::montage;
+use btfmrf::eval::{JUDGED_LIGHTS, Yardstick};
 use btfmrf::geometry::relight::Shadows;
 use btfmrf::model::{CoarseSource, ModelKind};
 use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
 use ndarray::{Array3, s};
-
-/// Frontal-view lights (theta, phi degrees), every elevation of the Bonn set and several azimuths.
-const LIGHTS: [(f64, f64); 9] = [
-    (15.0, 120.0),
-    (30.0, 90.0),
-    (45.0, 20.0),
-    (45.0, 160.0),
-    (45.0, 280.0),
-    (60.0, 90.0),
-    (60.0, 234.0),
-    (75.0, 45.0),
-    (75.0, 195.0),
-];
 
 /// Frontal-view lights halfway between measured ones of the Bonn set (`--halfway`): the
 /// generator renders the reference there, the model interpolates.
@@ -256,7 +243,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if halfway && rank.is_some() {
         return Err("--pair-rank needs measured lights: not with --halfway".into());
     }
-    let judged = if halfway { &HALFWAY } else { &LIGHTS };
+    let judged = if halfway { &HALFWAY } else { &JUDGED_LIGHTS };
     let kind: ModelKind = options.kind;
     for material in materials {
         let i = SyntheticMaterial::ALL

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use btfmrf::analysis::{AnalysisOptions, analyze};
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction};
-use btfmrf::eval::{Levels, Verdict, Yardstick};
+use btfmrf::eval::{JUDGED_LIGHTS, Levels, Verdict, Yardstick};
 use btfmrf::model::{CoarseSource, Exemplar, MaterialModel, ModelKind};
 use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
@@ -428,18 +428,7 @@ fn a_capture_larger_than_the_window_keeps_an_exemplar_registered_with_its_relief
     };
     let view = *btf.views().get(0).unwrap();
     let mut log_ratio = 0.0;
-    // The nine frontal lights of examples/judge_materials.rs.
-    let lights = [
-        (15.0, 120.0),
-        (30.0, 90.0),
-        (45.0, 20.0),
-        (45.0, 160.0),
-        (45.0, 280.0),
-        (60.0, 90.0),
-        (60.0, 234.0),
-        (75.0, 45.0),
-        (75.0, 195.0),
-    ];
+    let lights = JUDGED_LIGHTS;
     for (theta, phi) in lights {
         let light = Direction::new(theta, phi);
         let l = btf.lights().find(&light, 0.5).unwrap();
