@@ -74,9 +74,10 @@ pub struct AnalysisOptions {
     /// Largest side of the structure exemplar (0: none; see [`crate::model::Exemplar`]),
     /// stored when the model works in CIE Lab and has no range map, or has one and the
     /// exemplar brings the synthesis closer to the measured images (judged at analysis). Beside
-    /// a range map the exemplar is the map's window, at most [`RANGE_MAP_MAX_SIDE`] a side,
-    /// which the map then keeps at every pixel (see [`estimate_range_map`]). `None` (the
-    /// default): the side whose crops fill the exemplar's byte budget, [`exemplar_side_for`].
+    /// a range map the exemplar is the map's centred window, at most [`RANGE_MAP_MAX_SIDE`] a
+    /// side, which the map then keeps at every pixel (see [`estimate_range_map`]); a side
+    /// smaller than that window leaves no exemplar beside a range map. `None` (the default):
+    /// the side whose crops fill the exemplar's byte budget, [`exemplar_side_for`].
     pub exemplar_side: Option<usize>,
     /// Look for a lattice (a weave, tiles, a brick bond) and, when one is found, store each
     /// subspace image's mean period and fit the MRF to what is left (see
@@ -271,14 +272,14 @@ pub fn analyze(
     // Photometric stereo needs three lights: with fewer (a photograph) there is no relief to
     // estimate, and the exemplar carries the structure; that is no repair to report.
     // An exemplar beside a range map is cut where the map is kept at every pixel: the map's
-    // window (see estimate_range_map).
+    // window (see estimate_range_map). An exemplar side asked for below that window's would
+    // shrink the relief to it, so it leaves the map whole and the exemplar out.
     let wanted = options.exemplar_side != Some(0) && options.colour_space == ColourSpace::Lab;
-    let window_side = wanted.then(|| {
-        options
+    let window_side = (wanted
+        && options
             .exemplar_side
-            .unwrap_or(RANGE_MAP_MAX_SIDE)
-            .min(RANGE_MAP_MAX_SIDE)
-    });
+            .is_none_or(|side| side >= h.max(w).min(RANGE_MAP_MAX_SIDE)))
+    .then_some(RANGE_MAP_MAX_SIDE);
     let estimate = if options.range_map && btf.lights().len() >= 3 {
         match estimate_range_map(btf, options.shadows, window_side, progress) {
             Ok(estimate) => Some(estimate),

@@ -420,6 +420,11 @@ fn a_capture_larger_than_the_window_keeps_an_exemplar_registered_with_its_relief
     assert_eq!((exemplar.rows, exemplar.cols), (128, 128));
     assert!(averaged.range_map().expect("a range map").step > 1);
     assert!(averaged.exemplar().is_none());
+    // An exemplar side asked for below the window would shrink the relief to it: the map
+    // stays whole and no exemplar is cut.
+    let small = model(Some(64));
+    assert!(small.range_map().expect("a range map").step > 1);
+    assert!(small.exemplar().is_none());
     let o = SynthesisOptions {
         rows: 2 * side as usize,
         cols: 2 * side as usize,
