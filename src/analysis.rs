@@ -1375,15 +1375,15 @@ fn estimate_range_map(
         strength: Vec::new(),
         shadows: Shadows::Attached,
     };
-    // A window of all of the tile is the map itself; a part of it leaves the rest to the
-    // estimate, stored alike.
+    // With a window the images are registered with all of the estimate at every pixel,
+    // quantised like the map (a window of the whole tile is the map itself).
     let registered = match window {
-        Some((.., ch, cw)) if (ch, cw) != (h, w) => Array2::from_shape_vec(
+        Some(_) => Array2::from_shape_vec(
             (h, w),
             stored(&heights).into_iter().map(f64::from).collect(),
         )
         .expect("the heights' own shape"),
-        _ => map.registered(h, w),
+        None => map.registered(h, w),
     };
     // Each frontal image is read once and fitted with every kind of shadows in question.
     let kinds = match shadows {
