@@ -283,19 +283,17 @@ fn quilt_patches(
         for j in 0..lc.patches() {
             let (r0, hr) = lr.span(i, rows);
             let (c0, hc) = lc.span(j, cols);
-            let at = |y: usize, x: usize| ((r0 + y) % rows, (c0 + x) % cols);
+            // Torus rows and columns under the patch, computed once (not a division per access).
+            let (torus_rows, torus_cols) = (wrapped(r0, hr, rows), wrapped(c0, hc, cols));
+            let at = |y: usize, x: usize| (torus_rows[y], torus_cols[x]);
             let known_at: Vec<(usize, usize)> = (0..hr)
                 .flat_map(|y| (0..hc).map(move |x| (y, x)))
                 .filter(|&(y, x)| filled[at(y, x)])
                 .collect();
             let known = Known {
-                values: known_at
-                    .iter()
-                    .flat_map(|&(y, x)| {
-                        std::iter::once(&out)
-                            .chain(&out_colour)
-                            .map(move |field| field[at(y, x)])
-                    })
+                values: std::iter::once(&out)
+                    .chain(&out_colour)
+                    .map(|field| known_at.iter().map(|&(y, x)| field[at(y, x)]).collect())
                     .collect(),
                 at: known_at,
             };
@@ -307,7 +305,8 @@ fn quilt_patches(
                     candidate_offsets(side, len, phase.map(|p| (start, p, axis)))
                 });
             let (y0, x0, lift) = choose(&guide, (hr, hc), &offsets, &known, &mut rng);
-            let from = |y: usize, x: usize| ((y0 + y) % sr, (x0 + x) % sc);
+            let (source_rows, source_cols) = (wrapped(y0, hr, sr), wrapped(x0, hc, sc));
+            let from = |y: usize, x: usize| (source_rows[y], source_cols[x]);
             let src = |y: usize, x: usize| source[from(y, x)] + lift;
             let error = Array2::from_shape_fn((hr, hc), |(y, x)| {
                 let p = at(y, x);
@@ -328,9 +327,9 @@ fn quilt_patches(
             placements.push([r0, c0, y0, x0]);
             for y in 0..hr {
                 for x in 0..hc {
-                    let p = at(y, x);
+                    let (p, here) = (at(y, x), src(y, x));
                     if taken[(y, x)] {
-                        out[p] = src(y, x);
+                        out[p] = here;
                         for (c, o) in guide.colour.iter().zip(&mut out_colour) {
                             o[p] = c[from(y, x)];
                         }
@@ -340,10 +339,10 @@ fn quilt_patches(
                     // Every neighbour pair with a taken end gets this patch's difference: the
                     // pairs across its cut too, both ends lie in its overlap band.
                     if x + 1 < hc && (taken[(y, x)] || taken[(y, x + 1)]) {
-                        right[p] = src(y, x + 1) - src(y, x);
+                        right[p] = src(y, x + 1) - here;
                     }
                     if y + 1 < hr && (taken[(y, x)] || taken[(y + 1, x)]) {
-                        down[p] = src(y + 1, x) - src(y, x);
+                        down[p] = src(y + 1, x) - here;
                     }
                 }
             }
@@ -367,6 +366,11 @@ fn quilt_patches(
         source: (sr, sc),
     };
     (relief, label, placement)
+}
+
+/// The indices `first, first + 1, ...` (`len` of them) around a cycle of `period`.
+fn wrapped(first: usize, len: usize, period: usize) -> Vec<usize> {
+    (first..first + len).map(|i| i % period).collect()
 }
 
 /// `field` minus its Gaussian blur of standard deviation `sigma` samples (edges repeated, or
@@ -594,7 +598,7 @@ fn choose(
         return (y, x, 0.0);
     }
     let fits_inside = hr <= sr && hc <= sc;
-    let coarse = known.on_rows(guide.channels, |y| y % COARSE_STRIDE == 0);
+    let coarse = known.on_rows(|y| y % COARSE_STRIDE == 0);
     // A thin band on rows the stride skips (tiny patches) is scored on all of it.
     let rough_known = if coarse.at.is_empty() { known } else { &coarse };
     let rough = guide.misfits(&candidates, rough_known, fits_inside);
@@ -639,25 +643,24 @@ fn refine(
 }
 
 /// The output samples already filled under a patch: their places (patch row, column), and per
-/// place the relief's value followed by each matched companion's (scaled as in the guide).
+/// channel (the relief's, then each matched companion's, scaled as in the guide) the value at
+/// each place.
 struct Known {
     at: Vec<(usize, usize)>,
-    values: Vec<f64>,
+    values: Vec<Vec<f64>>,
 }
 
 impl Known {
-    /// The samples on the patch rows `keep` accepts; `channels` values a sample.
-    fn on_rows(&self, channels: usize, keep: impl Fn(usize) -> bool) -> Self {
-        let (at, values) = self
-            .at
-            .iter()
-            .zip(self.values.chunks_exact(channels))
-            .filter(|((y, _), _)| keep(*y))
-            .map(|(&p, v)| (p, v))
-            .unzip::<_, _, Vec<_>, Vec<_>>();
+    /// The samples on the patch rows `keep` accepts.
+    fn on_rows(&self, keep: impl Fn(usize) -> bool) -> Self {
+        let kept: Vec<usize> = (0..self.at.len()).filter(|&i| keep(self.at[i].0)).collect();
         Self {
-            at,
-            values: values.concat(),
+            at: kept.iter().map(|&i| self.at[i]).collect(),
+            values: self
+                .values
+                .iter()
+                .map(|channel| kept.iter().map(|&i| channel[i]).collect())
+                .collect(),
         }
     }
 }
@@ -673,10 +676,8 @@ struct Guide<'a> {
     relief: &'a Array2<f64>,
     relief_weight: f64,
     colour: Vec<Array2<f64>>,
-    /// The relief and the scaled companions interleaved, row-major: `channels` values a source
-    /// sample, the relief's first (what the misfits scan).
-    fused: Vec<f64>,
-    channels: usize,
+    /// The relief and the scaled companions, each row-major (what the misfits scan).
+    planes: Vec<Vec<f64>>,
 }
 
 impl<'a> Guide<'a> {
@@ -702,16 +703,15 @@ impl<'a> Guide<'a> {
                 .collect();
             (inverse(relief.var(0.0)), colour)
         };
-        let fused = relief
-            .indexed_iter()
-            .flat_map(|(p, &h)| std::iter::once(h).chain(colour.iter().map(move |c| c[p])))
+        let planes = std::iter::once(relief)
+            .chain(&colour)
+            .map(|plane| plane.iter().copied().collect())
             .collect();
         Self {
             relief,
             relief_weight,
-            channels: 1 + colour.len(),
             colour,
-            fused,
+            planes,
         }
     }
 
@@ -724,7 +724,7 @@ impl<'a> Guide<'a> {
         inside: bool,
     ) -> Vec<(f64, f64)> {
         let n = known.at.len().max(1) as f64;
-        let sums = match self.channels {
+        let sums = match self.planes.len() {
             1 => self.sums::<1>(candidates, known, inside),
             2 => self.sums::<2>(candidates, known, inside),
             3 => self.sums::<3>(candidates, known, inside),
@@ -742,7 +742,7 @@ impl<'a> Guide<'a> {
 
     /// For each candidate source offset, the sums of the `known` samples' differences from
     /// the source's: the relief's differences, their squares, and the matched companions'
-    /// squares. `CH` is [`Guide::channels`]. `inside`: every candidate patch lies inside the
+    /// squares. `CH` is the number of planes. `inside`: every candidate patch lies inside the
     /// source, so each run of known samples along a patch row is compared with a contiguous
     /// run of the source; otherwise the source is read sample by sample, wrapping around.
     fn sums<const CH: usize>(
@@ -762,59 +762,115 @@ impl<'a> Guide<'a> {
                 _ => runs.push((y * sc + x, i, 1)),
             }
         }
+        let scan = Scan::<CH> {
+            planes: std::array::from_fn(|c| &self.planes[c][..]),
+            values: std::array::from_fn(|c| &known.values[c][..]),
+            runs: &runs,
+            at: &known.at,
+            source: (sr, sc),
+            inside,
+            corner: (0, 0),
+        };
+        // The scan is compiled for the widest vector instructions the processor has, chosen
+        // at run time (the same sums in the same order: no fused multiply-adds).
+        let arch = pulp::Arch::new();
         candidates
             .par_iter()
-            .map(|&(y0, x0)| {
-                // Four lanes of independent accumulators (differences, their squares, the
-                // companions' squares), so the sums need not wait on each other.
-                let mut acc = [[0.0f64; 4]; 3];
-                if inside {
-                    let corner = &self.fused[(y0 * sc + x0) * CH..];
-                    for &(at, first, len) in &runs {
-                        accumulate::<CH>(
-                            &known.values[first * CH..(first + len) * CH],
-                            &corner[at * CH..(at + len) * CH],
-                            &mut acc,
-                        );
-                    }
-                } else {
-                    for (&(y, x), v) in known.at.iter().zip(known.values.chunks_exact(CH)) {
-                        let at = ((y0 + y) % sr * sc + (x0 + x) % sc) * CH;
-                        accumulate::<CH>(v, &self.fused[at..at + CH], &mut acc);
-                    }
-                }
-                acc.map(|lanes| lanes.iter().sum::<f64>())
-            })
+            .map(|&corner| arch.dispatch(Scan { corner, ..scan }))
             .collect()
     }
 }
 
-/// Adds the differences `values - source` (interleaved, `CH` values a sample, the relief's
-/// first) to `acc`: the relief's differences to `acc[0]`, their squares to `acc[1]`, the other
-/// channels' squares to `acc[2]`; four consecutive samples go to the four lanes, a remainder
-/// to the first.
-fn accumulate<const CH: usize>(values: &[f64], source: &[f64], acc: &mut [[f64; 4]; 3]) {
-    let mut add = |v: &[f64], s: &[f64], lane: usize| {
-        let d = v[0] - s[0];
-        acc[0][lane] += d;
-        acc[1][lane] += d * d;
-        for c in 1..CH {
-            let d = v[c] - s[c];
-            acc[2][lane] += d * d;
+/// The sums [`Guide::sums`] takes for one candidate `corner` (source row, column).
+#[derive(Clone, Copy)]
+struct Scan<'a, const CH: usize> {
+    /// The guide's planes, row-major, the relief's first.
+    planes: [&'a [f64]; CH],
+    /// The known samples' values per plane.
+    values: [&'a [f64]; CH],
+    /// Runs of known samples along a patch row (see [`Guide::sums`]); used when `inside`.
+    runs: &'a [(usize, usize, usize)],
+    /// The known samples' places in the patch (row, column); used when not `inside`.
+    at: &'a [(usize, usize)],
+    source: (usize, usize),
+    inside: bool,
+    corner: (usize, usize),
+}
+
+impl<const CH: usize> pulp::WithSimd for Scan<'_, CH> {
+    type Output = [f64; 3];
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> [f64; 3] {
+        let ((sr, sc), (y0, x0)) = (self.source, self.corner);
+        // Four lanes of independent accumulators (differences, their squares, the companions'
+        // squares), so the sums need not wait on each other.
+        let mut acc = [[0.0f64; 4]; 3];
+        if self.inside {
+            let corner = y0 * sc + x0;
+            for &(at, first, len) in self.runs {
+                let from = corner + at;
+                accumulate::<CH>(
+                    self.values.map(|v| &v[first..first + len]),
+                    self.planes.map(|p| &p[from..from + len]),
+                    &mut acc,
+                );
+            }
+        } else {
+            for (i, &(y, x)) in self.at.iter().enumerate() {
+                let at = (y0 + y) % sr * sc + (x0 + x) % sc;
+                accumulate::<CH>(
+                    self.values.map(|v| &v[i..=i]),
+                    self.planes.map(|p| &p[at..=at]),
+                    &mut acc,
+                );
+            }
         }
+        acc.map(|lanes| lanes.iter().sum::<f64>())
+    }
+}
+
+/// Adds the differences `values - source` (one slice per plane, of one length, the relief's
+/// first) to `acc`: the relief's differences to `acc[0]`, their squares to `acc[1]`, the other
+/// planes' squares to `acc[2]` (plane by plane for each sample); four consecutive samples go to
+/// the four lanes, a remainder to the first.
+#[inline(always)]
+fn accumulate<const CH: usize>(
+    values: [&[f64]; CH],
+    source: [&[f64]; CH],
+    acc: &mut [[f64; 4]; 3],
+) {
+    let len = values[0].len();
+    assert!(
+        values.iter().chain(&source).all(|s| s.len() == len),
+        "planes of one length"
+    );
+    let quad = |plane: &[f64], k: usize| -> [f64; 4] {
+        plane[4 * k..4 * k + 4].try_into().expect("four samples")
     };
-    let (vc, sc) = (values.chunks_exact(4 * CH), source.chunks_exact(4 * CH));
-    let tail = vc
-        .remainder()
-        .chunks_exact(CH)
-        .zip(sc.remainder().chunks_exact(CH));
-    for (v, s) in vc.zip(sc) {
-        for lane in 0..4 {
-            add(&v[lane * CH..], &s[lane * CH..], lane);
+    let difference =
+        |a: [f64; 4], b: [f64; 4]| [a[0] - b[0], a[1] - b[1], a[2] - b[2], a[3] - b[3]];
+    let plus = |a: [f64; 4], b: [f64; 4]| [a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3]];
+    let square = |a: [f64; 4]| [a[0] * a[0], a[1] * a[1], a[2] * a[2], a[3] * a[3]];
+    let [mut sum, mut squares, mut others] = *acc;
+    for k in 0..len / 4 {
+        let d = difference(quad(values[0], k), quad(source[0], k));
+        sum = plus(sum, d);
+        squares = plus(squares, square(d));
+        for c in 1..CH {
+            let d = difference(quad(values[c], k), quad(source[c], k));
+            others = plus(others, square(d));
         }
     }
-    for (v, s) in tail {
-        add(v, s, 0);
+    *acc = [sum, squares, others];
+    for i in len - len % 4..len {
+        let d = values[0][i] - source[0][i];
+        acc[0][0] += d;
+        acc[1][0] += d * d;
+        for c in 1..CH {
+            let d = values[c][i] - source[c][i];
+            acc[2][0] += d * d;
+        }
     }
 }
 
@@ -979,7 +1035,7 @@ mod tests {
                 .filter(|&(y, x)| y < 8 || x < 8)
                 .collect();
             let known = Known {
-                values: at.iter().map(|&(y, x)| source[(y0 + y, x0 + x)]).collect(),
+                values: vec![at.iter().map(|&(y, x)| source[(y0 + y, x0 + x)]).collect()],
                 at,
             };
             for pick in [
@@ -999,7 +1055,7 @@ mod tests {
     }
 
     #[test]
-    fn fused_misfits_match_the_sums_written_out() {
+    fn scanned_misfits_match_the_sums_written_out() {
         // A relief and two matched companions; known samples on an L-shaped band of a 6 x 7
         // patch. Both the contiguous and the wrapping scan must give, per candidate, the
         // weighted misfit and the lift as written out sample by sample.
@@ -1017,8 +1073,8 @@ mod tests {
                 .collect();
             let value = |k: usize, c: usize| ((k * 13 + c * 5) % 11) as f64 - 4.0;
             let known = Known {
-                values: (0..at.len())
-                    .flat_map(|k| (0..guide.channels).map(move |c| value(k, c)))
+                values: (0..guide.planes.len())
+                    .map(|c| (0..at.len()).map(|k| value(k, c)).collect())
                     .collect(),
                 at,
             };
