@@ -16,7 +16,7 @@ use crate::decompose::stationarity::{NON_STATIONARY_SHARE, block_mean_share};
 use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceClustering};
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::relight::Shadows;
-use crate::geometry::{self, relight};
+use crate::geometry::{self, detail_scale, relight};
 use crate::model::{
     AnyLevels, BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma,
     LightLightness, LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS,
@@ -93,6 +93,11 @@ pub struct AnalysisOptions {
     /// (the default): the MRF's, unless beside a range map the judge finds the laid crops'
     /// clearly closer to the measured images ([`judged_exemplar`]).
     pub coarse: Option<CoarseSource>,
+    /// Where a capture larger than [`RANGE_MAP_MAX_SIDE`] keeps its range map and the
+    /// exemplar beside it; `None` (the default): the whole capture averaged down where its
+    /// relief varies more at the scales a window's patches would cut through than finer than
+    /// the averaged samples ([`choose_layout`]), else the window.
+    pub relief_layout: Option<ReliefLayout>,
 }
 
 /// The default largest side of the structure exemplar for `subspaces` subspace images,
@@ -146,6 +151,7 @@ impl Default for AnalysisOptions {
             periodic: true,
             shadows: None,
             coarse: None,
+            relief_layout: None,
         }
     }
 }
@@ -217,6 +223,34 @@ pub fn analyze(
     options: &AnalysisOptions,
     progress: &dyn Progress,
 ) -> Result<(MaterialModel, AnalysisReport)> {
+    let (model, report, layout) = analyze_in(btf, options, progress)?;
+    // The whole capture, chosen for its relief, is kept only if its exemplar earned its place
+    // at the check: else the window's exemplar may (the clay-leaf capture: x1.02 the
+    // another-crop level averaged whole without one, x0.93 with the window's), and without
+    // one either, the averaged map keeps all of the relief.
+    if layout == Some(ReliefLayout::Whole)
+        && options.relief_layout.is_none()
+        && model.exemplar().is_none()
+    {
+        let window = AnalysisOptions {
+            relief_layout: Some(ReliefLayout::Window),
+            ..options.clone()
+        };
+        let (windowed, report, _) = analyze_in(btf, &window, progress)?;
+        if windowed.exemplar().is_some() {
+            return Ok((windowed, report));
+        }
+    }
+    Ok((model, report))
+}
+
+/// [`analyze`] with the range map's layout as chosen or asked for (`None` without a layout to
+/// choose: no exemplar wanted, or no range map).
+fn analyze_in(
+    btf: &Btf,
+    options: &AnalysisOptions,
+    progress: &dyn Progress,
+) -> Result<(MaterialModel, AnalysisReport, Option<ReliefLayout>)> {
     let direction_share = options.direction_share.unwrap_or(if btf.views().len() > 1 {
         crate::decompose::cluster::DIRECTION_SHARE
     } else {
@@ -275,13 +309,18 @@ pub fn analyze(
     // window (see estimate_range_map). An exemplar side asked for below that window's would
     // shrink the relief to it, so it leaves the map whole and the exemplar out.
     let wanted = options.exemplar_side != Some(0) && options.colour_space == ColourSpace::Lab;
-    let window_side = (wanted
+    let layout = (wanted
         && options
             .exemplar_side
             .is_none_or(|side| side >= h.max(w).min(RANGE_MAP_MAX_SIDE)))
-    .then_some(RANGE_MAP_MAX_SIDE);
+    .then_some(options.relief_layout);
+    let mut chosen = None;
     let estimate = if options.range_map && btf.lights().len() >= 3 {
-        match estimate_range_map(btf, options.shadows, window_side, progress) {
+        let estimate = relief_heights(btf, progress).and_then(|heights| {
+            chosen = layout.map(|l| l.unwrap_or_else(|| choose_layout(&heights)));
+            estimate_range_map(btf, heights, options.shadows, chosen)
+        });
+        match estimate {
             Ok(estimate) => Some(estimate),
             Err(e) => {
                 report
@@ -297,7 +336,7 @@ pub fn analyze(
     // divided out before fitting, since synthesis applies it again (geometry::relight).
     let frontal = geometry::frontal_view(btf);
     let (range_map, registered, window) = match estimate {
-        Some(e) => (Some(e.map), Some(e.registered), e.window),
+        Some(e) => (Some(e.map), Some(e.registered), e.region),
         None => (None, None, None),
     };
     let mut clustering = SubspaceClustering::fit(
@@ -356,11 +395,12 @@ pub fn analyze(
         .then(|| match (lattice, registered_window) {
             (Some(_), _) => {
                 let side = exemplar_side.min(LATTICE_EXEMPLAR_SIDE);
-                (0, 0, h.min(side), w.min(side))
+                Region::at_every_texel((0, 0, h.min(side), w.min(side)))
             }
-            (None, Some(window)) => window,
-            (None, None) => centred_window(h, w, exemplar_side),
+            (None, Some(region)) => region,
+            (None, None) => Region::at_every_texel(centred_window(h, w, exemplar_side)),
         });
+    let exemplar_step = crop.map_or(1, |c| c.step);
     // On a lattice the relief is laid in step with the colour's period, so shading left in an
     // oblique view's representative would be applied twice, coherently (the knit at a 75
     // degree light came out 27 % too dark); a quilted relief falls anywhere and leaves it to
@@ -414,11 +454,7 @@ pub fn analyze(
         if let Some(p) = &periodic {
             divide_by_period(&mut image, p, k);
         }
-        let lab_crop = crop.map(|(y0, x0, ch, cw)| {
-            ColourSpace::Lab
-                .planes(&image)
-                .map(|p| p.slice(ndarray::s![y0..y0 + ch, x0..x0 + cw]).to_owned())
-        });
+        let lab_crop = crop.map(|c| ColourSpace::Lab.planes(&image).map(|p| c.cut(&p)));
         let (subspace, notes) = options.kind.visit(FitSubspace {
             image: &image,
             options,
@@ -463,7 +499,7 @@ pub fn analyze(
     // worse in structure.
     let parts = (range_map.as_ref(), periodic.as_ref());
     let limit = crate::eval::artefacts::Detector::Chroma.limit(0.0);
-    let preferred_shares = off_chroma_shares(btf, &clustering, &fitted, parts)?;
+    let preferred_shares = off_chroma_shares(btf, &clustering, &fitted, parts, exemplar_step)?;
     let unfit: Vec<usize> = preferred_shares
         .iter()
         .filter(|&(_, &share)| share > limit)
@@ -478,7 +514,7 @@ pub fn analyze(
         for (&k, f) in unfit.iter().zip(refitted) {
             trial[k] = f;
         }
-        let fallback_shares = off_chroma_shares(btf, &clustering, &trial, parts)?;
+        let fallback_shares = off_chroma_shares(btf, &clustering, &trial, parts, exemplar_step)?;
         for &k in &unfit {
             let (fallback, preferred) = (fallback_shares.get(&k), preferred_shares.get(&k));
             if matches!((fallback, preferred), (Some(f), Some(p)) if f < p) {
@@ -499,6 +535,7 @@ pub fn analyze(
         &crops,
         &crop_counts,
         ExemplarBudget::for_lattice(periodic.is_some()),
+        exemplar_step,
     );
     report.warnings.extend(stationarity_warning(shares));
     // Where the exemplar is judged: up to EXEMPLAR_JUDGED subspace representatives spread
@@ -537,7 +574,7 @@ pub fn analyze(
     let model = with_pair_gains(model, &measured_luminance)?;
     let (model, trimmed) = within_budget(model, options.max_bytes, &measured_luminance)?;
     report.warnings.extend(trimmed);
-    Ok((model, report))
+    Ok((model, report, chosen))
 }
 
 /// The measured L* quantiles of every light's image in `view` ([`LightLightness`]).
@@ -756,6 +793,7 @@ fn off_chroma_shares(
     clustering: &SubspaceClustering,
     fitted: &[Fitted],
     (range_map, periodic): (Option<&RangeMap>, Option<&PeriodicPart>),
+    exemplar_step: usize,
 ) -> Result<BTreeMap<usize, f64>> {
     let preferred: Vec<usize> = (0..fitted.len())
         .filter(|&k| clustering.representatives[k] != clustering.fallbacks[k])
@@ -785,6 +823,7 @@ fn off_chroma_shares(
             &crops,
             &counts,
             ExemplarBudget::for_lattice(periodic.is_some()),
+            exemplar_step,
         ),
         periodic: periodic.cloned(),
         pair_gains: Vec::new(),
@@ -1234,11 +1273,12 @@ fn exemplar_crops(
 /// chroma, of their chroma at [`chroma_step`] blocks, with each subspace's weights.
 ///
 /// Each crop counts `counts` in the mean and the deviations ([`exemplar_crops`]); every crop
-/// is projected on them.
+/// is projected on them. `texel_step`: texels per crop sample.
 fn exemplar_from(
     crops: &[[Array2<f64>; 3]],
     counts: &[f64],
     budget: ExemplarBudget,
+    texel_step: usize,
 ) -> Option<Exemplar> {
     let (rows, cols) = crops.first()?[0].dim();
     let step = chroma_step(rows, cols);
@@ -1282,6 +1322,7 @@ fn exemplar_from(
     Some(Exemplar {
         rows,
         cols,
+        step: texel_step,
         lightness: principal(
             &lightness,
             Some(counts),
@@ -1322,51 +1363,145 @@ fn centred_window(h: usize, w: usize, side: usize) -> (usize, usize, usize, usiz
     ((h - ch) / 2, (w - cw) / 2, ch, cw)
 }
 
+/// Texels of the measured images that a range map and the exemplar registered with it cover:
+/// `rows` x `cols` from (`y0`, `x0`), averaged over `step` x `step` blocks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Region {
+    y0: usize,
+    x0: usize,
+    rows: usize,
+    cols: usize,
+    step: usize,
+}
+
+impl Region {
+    /// The window (first row, first column, rows, columns) at every texel.
+    fn at_every_texel((y0, x0, rows, cols): (usize, usize, usize, usize)) -> Self {
+        Self {
+            y0,
+            x0,
+            rows,
+            cols,
+            step: 1,
+        }
+    }
+
+    /// The region of `plane` (of the measured images' shape), block means at its step.
+    fn cut(&self, plane: &Array2<f64>) -> Array2<f64> {
+        let window = plane.slice(ndarray::s![
+            self.y0..self.y0 + self.rows,
+            self.x0..self.x0 + self.cols
+        ]);
+        match self.step {
+            1 => window.to_owned(),
+            step => geometry::downsample(&window.to_owned(), step),
+        }
+    }
+}
+
+/// Where a capture larger than [`RANGE_MAP_MAX_SIDE`] keeps its range map and the exemplar
+/// beside it (see [`AnalysisOptions::relief_layout`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReliefLayout {
+    /// The centred window of [`RANGE_MAP_MAX_SIDE`] at every texel: the finest relief and
+    /// detail, of a part of the capture.
+    Window,
+    /// All of the capture, averaged down to [`RANGE_MAP_MAX_SIDE`] samples a side at most:
+    /// structures larger than a window's quilt patches stay whole.
+    Whole,
+}
+
+impl ReliefLayout {
+    /// The region of an `h` x `w` capture this layout covers.
+    fn region(self, h: usize, w: usize) -> Region {
+        match self {
+            Self::Window => Region::at_every_texel(centred_window(h, w, RANGE_MAP_MAX_SIDE)),
+            Self::Whole => Region {
+                y0: 0,
+                x0: 0,
+                rows: h,
+                cols: w,
+                step: h.max(w).div_ceil(RANGE_MAP_MAX_SIDE).max(1),
+            },
+        }
+    }
+}
+
+/// Photometric stereo on the frontal view and Frankot-Chellappa integration: the relief's
+/// heights at every texel of the measured images.
+fn relief_heights(
+    btf: &Btf,
+    progress: &dyn Progress,
+) -> std::result::Result<Array2<f64>, crate::btf::BtfError> {
+    let normals = geometry::estimate_normals(btf, geometry::frontal_view(btf), progress)?;
+    Ok(geometry::frankot_chellappa(&normals.normals))
+}
+
+/// Where a capture keeps its range map and exemplar: the window at every texel, or the whole
+/// capture averaged down (the same for a capture within the window). Beside a window, synthesis takes the
+/// relief's variation coarser than the window's patches from the MRF (random blobs, not
+/// structures); averaged down, the relief keeps it but loses what is finer than its samples.
+/// So the whole capture is kept where the relief's `heights` hold more variance between the
+/// two layouts' detail scales ([`detail_scale`] of each, in texels) than finer than half the
+/// averaged map's sample. Measured on the built-in materials at 256^2, enlarged to 512^2
+/// (nine lights, seed 1, x the another-crop level, window -> whole): stones 2.60 -> 1.71
+/// (their relief's variance 0.72 between the scales against 0.18 finer), sponge 2.04 -> 1.48
+/// (0.40 against 0.07); the leather's creases lie in the finest band (0.004 against 0.20) and
+/// lost to the averaging they left it at 3.69 (window: 2.00).
+fn choose_layout(heights: &Array2<f64>) -> ReliefLayout {
+    let (side, window) = (RANGE_MAP_MAX_SIDE, ReliefLayout::Window);
+    let (h, w) = heights.dim();
+    let whole = ReliefLayout::Whole.region(h, w);
+    if whole.step == 1 {
+        return window;
+    }
+    let (rows, cols) = (h.div_ceil(whole.step), w.div_ceil(whole.step));
+    let window_scale = detail_scale(side.min(h), side.min(w));
+    let whole_scale = detail_scale(rows, cols) * whole.step as f64;
+    let coarse = |sigma: f64| geometry::split_detail(heights, sigma, false).0;
+    let between = (&coarse(window_scale) - &coarse(whole_scale)).var(0.0);
+    let finest = geometry::split_detail(heights, whole.step as f64 / 2.0, false)
+        .1
+        .var(0.0);
+    if between > finest {
+        ReliefLayout::Whole
+    } else {
+        window
+    }
+}
+
 /// What photometric stereo gives the analysis: the range map the model stores, the heights
-/// registered with the measured images (h x w texels), and the window of them the map holds
-/// at every pixel, if it does.
+/// registered with the measured images (h x w texels), and the region they hold, where an
+/// exemplar is cut, if one is wanted.
 struct RangeEstimate {
     map: RangeMap,
     registered: Array2<f64>,
-    /// (first row, first column, rows, columns) of the measured tile; `None` for a map averaged
-    /// down over the whole tile.
-    window: Option<(usize, usize, usize, usize)>,
+    /// `None` for a map averaged down over the whole tile with no exemplar beside it.
+    region: Option<Region>,
 }
 
 /// Photometric stereo on the frontal view, Frankot-Chellappa integration, and the bump strength
 /// of every light fitted to the frontal images (geometry::relight), with the shadows `shadows`
 /// asks for or, for `None`, those [`choose_shadows`] picks.
 ///
-/// With `window_side`, the map keeps the centred window of that side at every pixel, where the
-/// exemplar is cut too, so that synthesis lays the two with the same patches. Without it, a
-/// tile over [`RANGE_MAP_MAX_SIDE`] is averaged down to that side, which keeps all of the tile
-/// but none of its finest relief: on the built-in sponge at 256^2, enlarged to 1024^2, the
-/// averaged map without an exemplar was x2.93 the another-crop level (the peer's quilt x1.02).
+/// With a `layout`, the map covers the [`Region`] it says, where the exemplar is cut too, so
+/// that synthesis lays the two with the same patches. Without one, a tile over
+/// [`RANGE_MAP_MAX_SIDE`] is averaged down to that side, which keeps all of the tile but none
+/// of its finest relief: on the built-in sponge at 256^2, enlarged to 1024^2, the averaged map
+/// without an exemplar was x2.93 the another-crop level (the peer's quilt x1.02).
 fn estimate_range_map(
     btf: &Btf,
+    heights: Array2<f64>,
     shadows: Option<Shadows>,
-    window_side: Option<usize>,
-    progress: &dyn Progress,
+    layout: Option<ReliefLayout>,
 ) -> std::result::Result<RangeEstimate, crate::btf::BtfError> {
     let view = geometry::frontal_view(btf);
-    let normals = geometry::estimate_normals(btf, view, progress)?;
-    let heights = geometry::frankot_chellappa(&normals.normals);
     let (h, w) = heights.dim();
     let stored =
         |tile: &Array2<f64>| format::as_stored(&tile.iter().map(|&v| v as f32).collect::<Vec<_>>());
-    let window = window_side.map(|side| centred_window(h, w, side));
-    let (tile, step) = match window {
-        Some((y0, x0, ch, cw)) => (
-            heights
-                .slice(ndarray::s![y0..y0 + ch, x0..x0 + cw])
-                .to_owned(),
-            1,
-        ),
-        None => {
-            let step = h.max(w).div_ceil(RANGE_MAP_MAX_SIDE).max(1);
-            (geometry::downsample(&heights, step), step)
-        }
-    };
+    let region = layout.unwrap_or(ReliefLayout::Whole).region(h, w);
+    let tile = region.cut(&heights);
+    let step = region.step;
     let mut map = RangeMap {
         rows: tile.nrows(),
         cols: tile.ncols(),
@@ -1375,15 +1510,17 @@ fn estimate_range_map(
         strength: Vec::new(),
         shadows: Shadows::Attached,
     };
-    // With a window the images are registered with all of the estimate at every pixel,
-    // quantised like the map (a window of the whole tile is the map itself).
-    let registered = match window {
-        Some(_) => Array2::from_shape_vec(
+    // At every texel the images are registered with all of the estimate, quantised like the
+    // map (a window of the whole tile is the map itself); an averaged map with itself, so the
+    // de-shading divides out only the relief that synthesis shades again.
+    let registered = if step == 1 {
+        Array2::from_shape_vec(
             (h, w),
             stored(&heights).into_iter().map(f64::from).collect(),
         )
-        .expect("the heights' own shape"),
-        None => map.registered(h, w),
+        .expect("the heights' own shape")
+    } else {
+        map.registered(h, w)
     };
     // Each frontal image is read once and fitted with every kind of shadows in question.
     let kinds = match shadows {
@@ -1413,7 +1550,7 @@ fn estimate_range_map(
     Ok(RangeEstimate {
         map,
         registered,
-        window,
+        region: layout.map(|_| region),
     })
 }
 
@@ -1541,6 +1678,34 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_relief_with_structures_larger_than_a_windows_patches_keeps_the_whole_capture() {
+        use crate::btf::synthetic::{SyntheticBtf, SyntheticMaterial};
+        let heights = |material, side| {
+            let truth = SyntheticBtf::new(material, side, 5).unwrap().ground_truth();
+            truth.height.mapv(f64::from)
+        };
+        // The stones and the sponge's cells are larger than a 128^2 window's patches at
+        // 256^2; the leather's relief is its fine creases.
+        assert_eq!(
+            choose_layout(&heights(SyntheticMaterial::Stones, 256)),
+            ReliefLayout::Whole
+        );
+        assert_eq!(
+            choose_layout(&heights(SyntheticMaterial::Sponge, 256)),
+            ReliefLayout::Whole
+        );
+        assert_eq!(
+            choose_layout(&heights(SyntheticMaterial::Leather, 256)),
+            ReliefLayout::Window
+        );
+        // Within the window there is nothing to average.
+        assert_eq!(
+            choose_layout(&heights(SyntheticMaterial::Stones, 128)),
+            ReliefLayout::Window
+        );
+    }
 
     #[test]
     fn principal_fields_keep_the_deviations_the_periods_have() {

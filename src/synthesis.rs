@@ -80,8 +80,11 @@ pub struct SynthesisCache {
 /// An exemplar's basis fields copied onto the output with one quilt's patches.
 #[derive(Debug)]
 struct LaidExemplar {
-    /// Where every output sample's exemplar sample lies.
+    /// Where every output sample's exemplar sample lies (every torus sample's, for an
+    /// exemplar at a step).
     placement: Placement,
+    /// How the laid fields reach the output's texels.
+    scale: Scale,
     /// The exemplar's basis as laid ([`exemplar_planes`]): the L* crops (the mean, then the
     /// deviations), then an (a*, b*) pair per chroma basis field.
     planes: Vec<Array2<f64>>,
@@ -110,7 +113,49 @@ impl LaidExemplar {
         for (&c, plane) in terms {
             sum.scaled_add(c, plane);
         }
-        self.placement.lay(&sum)
+        self.scale.apply(self.placement.lay(&sum))
+    }
+}
+
+/// How a quilt's torus of exemplar (or range-map) samples reaches the output's texels.
+#[derive(Debug, Clone, Copy)]
+enum Scale {
+    /// A sample a texel: the output is the torus's top-left corner (already cut to it).
+    Texels,
+    /// Samples of several texels: the torus resampled (bilinear, wrapping) to `torus` texels,
+    /// then its top-left `output` texels.
+    Stepped {
+        torus: (usize, usize),
+        output: (usize, usize),
+    },
+}
+
+impl Scale {
+    /// For an output of `o` from samples of `step` texels with patches of `patch` samples:
+    /// the scale and the torus's size in samples.
+    fn new(o: &SynthesisOptions, step: usize, patch: usize) -> (Self, (usize, usize)) {
+        let (tr, tc) = quilt_torus(o, patch * step);
+        if step <= 1 {
+            return (Self::Texels, (tr, tc));
+        }
+        let samples = |n: usize| ((n as f64 / step as f64).round() as usize).max(1);
+        let scale = Self::Stepped {
+            torus: (tr, tc),
+            output: (o.rows, o.cols),
+        };
+        (scale, (samples(tr), samples(tc)))
+    }
+
+    /// A field laid on the torus's samples, on the output's texels.
+    fn apply(&self, field: Array2<f64>) -> Array2<f64> {
+        match *self {
+            Self::Texels => field,
+            Self::Stepped {
+                torus: (tr, tc),
+                output: (rows, cols),
+                ..
+            } => cropped(resample_periodic(&field, tr, tc), rows, cols),
+        }
     }
 }
 
@@ -367,9 +412,12 @@ impl MaterialModel {
                 let offset = plane - &laid;
                 match coarse {
                     // The plane's coarse part plus the laid crop's detail is the laid crop plus
-                    // the coarse part of their difference (the split is linear): one blur.
+                    // the coarse part of their difference (the split is linear): one blur. An
+                    // exemplar at a step holds no detail finer than its samples, and the MRF's
+                    // is not added there: it came out as salt-and-pepper specks over the
+                    // built-in stones at 256^2 (x2.46 the another-crop level against x1.71).
                     CoarseSource::Mrf => {
-                        let sigma = detail_scale(e.rows, e.cols);
+                        let sigma = detail_scale(e.rows, e.cols) * e.step as f64;
                         laid + split_detail(&offset, sigma, o.tileable).0
                     }
                     CoarseSource::Laid => laid + offset.mean().unwrap_or(0.0),
@@ -512,7 +560,7 @@ impl MaterialModel {
         details: LaidExemplar,
         noise: NoiseBank,
     ) -> SynthesisCache {
-        let heights = cropped(relief.integrate(), o.rows, o.cols);
+        let heights = cropped(details.scale.apply(relief.integrate()), o.rows, o.cols);
         let cache = self.empty_cache(o, Some(heights), noise);
         cache
             .structure
@@ -706,7 +754,10 @@ impl MaterialModel {
     /// the relief and its dark colour then stay together. `None` otherwise.
     fn laid_together(&self, o: &SynthesisOptions) -> Option<(QuiltedRelief, LaidExemplar)> {
         let (map, e) = (self.range_map()?, self.exemplar()?);
-        if map.step != 1 || (map.rows, map.cols) != (e.rows, e.cols) || self.periodic().is_some() {
+        if map.step != e.step
+            || (map.rows, map.cols) != (e.rows, e.cols)
+            || self.periodic().is_some()
+        {
             return None;
         }
         let seed = crate::mrf::noise::mix(o.seed, RANGE_SEED);
@@ -848,13 +899,18 @@ fn laid_exemplar(
     o: &SynthesisOptions,
     (seed, phase, guide_is_lightness): (u64, Option<&Phase>, bool),
 ) -> (QuiltedRelief, LaidExemplar) {
-    let torus = quilt_torus(o, patch_side(e.rows, e.cols));
+    let (scale, torus) = Scale::new(o, e.step, patch_side(e.rows, e.cols));
     let (planes, matched) = exemplar_planes(e, guide_is_lightness);
     let (relief, placement) = quilt_laid(guide, &planes, &matched, torus, seed, phase);
+    let placement = match scale {
+        Scale::Texels => placement.cropped(o.rows, o.cols),
+        Scale::Stepped { .. } => placement,
+    };
     (
         relief,
         LaidExemplar {
-            placement: placement.cropped(o.rows, o.cols),
+            placement,
+            scale,
             planes,
             lightness: e.lightness.basis.len(),
         },

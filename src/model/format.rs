@@ -5,9 +5,9 @@ use std::path::Path;
 
 use super::material::{
     BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LightLightness,
-    LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS,
-    MAX_TILE_SAMPLES, MaterialModel, MaterialParts, PeriodicPart, Principal, RangeMap,
-    SubspaceModel,
+    LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_EXEMPLAR_STEP,
+    MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, PeriodicPart, Principal,
+    RangeMap, SubspaceModel,
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
@@ -30,9 +30,9 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// files (no exemplar chroma), version 6 files (no chroma-lightness coupling), version 7
 /// files (no lit lightness tables), version 8 files (exemplar L* deviations always 8-bit),
 /// version 9 files (no cast shadows), version 10 files (an exemplar's coarse variation
-/// always the MRF's), version 11 files (no light lightness tables) and version 12 files (no
-/// chroma spreads) are still read.
-pub const VERSION: u16 = 13;
+/// always the MRF's), version 11 files (no light lightness tables), version 12 files (no
+/// chroma spreads) and version 13 files (an exemplar at every texel) are still read.
+pub const VERSION: u16 = 14;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -348,6 +348,8 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
                 CoarseSource::Mrf => 0,
                 CoarseSource::Laid => 1,
             });
+            // Version 14: texels per exemplar sample.
+            w.u8(e.step as u8);
             write_principal(w, &e.lightness, (Storage::Byte, deviations));
             if let Some(c) = &e.chroma {
                 w.u8(c.step as u8);
@@ -1068,6 +1070,16 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
                 Some(1) => CoarseSource::Laid,
                 Some(c) => return Err(format!("exemplar coarse source {c} (0 or 1)")),
             };
+            let step = if version >= 14 {
+                usize::from(r.u8()?)
+            } else {
+                1
+            };
+            if !(1..=MAX_EXEMPLAR_STEP).contains(&step) {
+                return Err(format!(
+                    "exemplar step of {step} texels (1..={MAX_EXEMPLAR_STEP})"
+                ));
+            }
             let lightness = if version >= 5 {
                 read_principal(
                     r,
@@ -1114,6 +1126,7 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
             Ok(Some(Exemplar {
                 rows,
                 cols,
+                step,
                 lightness,
                 deviation_codes,
                 chroma,
@@ -1377,6 +1390,29 @@ mod tests {
         assert_eq!(coarse(&record(Some(1)), 11), CoarseSource::Laid);
         let e = read(&record(Some(2)), 11).unwrap_err();
         assert!(e.contains("coarse source 2"), "{e}");
+    }
+
+    #[test]
+    fn an_exemplar_names_its_step_from_version_14() {
+        // Flag 1, a 1 x 1 crop, 8-bit deviations, coarse source 0, [step,] no deviations, the
+        // mean.
+        let record = |step: Option<u8>| {
+            let mut w = Writer(vec![1, 1, 0, 1, 0, 8, 0]);
+            w.0.extend(step);
+            w.u8(0);
+            w.f32(40.0);
+            w.f32(1.0);
+            w.u8(10);
+            w.0
+        };
+        let read = |bytes: &[u8], version| read_exemplar(&mut Reader::new(bytes), 1, version);
+        let step = |bytes: &[u8], version| read(bytes, version).unwrap().unwrap().step;
+        assert_eq!(step(&record(None), 13), 1);
+        assert_eq!(step(&record(Some(3)), 14), 3);
+        for bad in [0, MAX_EXEMPLAR_STEP as u8 + 1] {
+            let e = read(&record(Some(bad)), 14).unwrap_err();
+            assert!(e.contains(&format!("exemplar step of {bad}")), "{e}");
+        }
     }
 
     #[test]

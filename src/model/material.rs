@@ -311,6 +311,9 @@ impl PeriodicPart {
 /// Most principal deviations the subspace images' exemplar crops are stored with.
 pub const MAX_EXEMPLAR_COMPONENTS: usize = 8;
 
+/// The largest [`Exemplar::step`].
+pub const MAX_EXEMPLAR_STEP: usize = 16;
+
 /// A compact exemplar of the material's structure (issue 11: a photograph has no range map to
 /// carry it): the CIE L* of the same crop of every subspace image, at the measured pixel
 /// scale, stored as their mean and a few principal deviations. At synthesis the crops are
@@ -322,10 +325,14 @@ pub const MAX_EXEMPLAR_COMPONENTS: usize = 8;
 /// (the shading of a relief, its shadows and highlights, differ from light to light).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Exemplar {
-    /// Rows of the crop.
+    /// Rows of the crop, samples.
     pub rows: usize,
-    /// Columns of the crop.
+    /// Columns of the crop, samples.
     pub cols: usize,
+    /// Texels per sample along each axis (1..=[`MAX_EXEMPLAR_STEP`]; format version 14, older
+    /// files 1): a capture too large for a crop at every texel keeps all of it, averaged over
+    /// `step` x `step` blocks like its range map, so its structures fit the quilt's patches.
+    pub step: usize,
     /// The crops' L*: mean and up to [`MAX_EXEMPLAR_COMPONENTS`] principal deviations,
     /// `rows * cols` values each, row-major.
     pub lightness: Principal,
@@ -595,6 +602,14 @@ impl MaterialModel {
                     b.tables.len()
                 ));
             }
+        }
+        if let Some(e) = &parts.exemplar
+            && !(1..=MAX_EXEMPLAR_STEP).contains(&e.step)
+        {
+            return bad(format!(
+                "exemplar step of {} texels (1..={MAX_EXEMPLAR_STEP})",
+                e.step
+            ));
         }
         if let Some(e) = &parts.exemplar
             && (e.rows == 0
@@ -1095,6 +1110,7 @@ mod tests {
             p.exemplar = Some(Exemplar {
                 rows: 2,
                 cols: 2,
+                step: 1,
                 lightness: Principal {
                     basis: vec![vec![50.0; 4]],
                     weights: vec![vec![]],
@@ -1109,6 +1125,7 @@ mod tests {
         let exemplar = Exemplar {
             rows: 2,
             cols: 2,
+            step: 1,
             lightness: Principal {
                 basis: vec![vec![50.0; 4], vec![1.0, -1.0, 2.0, 0.0]],
                 weights: vec![vec![0.0], vec![3.0]],
@@ -1159,6 +1176,15 @@ mod tests {
         for (rows, step) in [(2, 2), (1, 0), (1, MAX_CHROMA_STEP + 1)] {
             let e = refused(|p| p.exemplar = Some(with_chroma(rows, step)));
             assert!(e.contains("exemplar chroma of"), "{e}");
+        }
+        for step in [0, MAX_EXEMPLAR_STEP + 1] {
+            let e = refused(|p| {
+                p.exemplar = Some(Exemplar {
+                    step,
+                    ..exemplar.clone()
+                })
+            });
+            assert!(e.contains("exemplar step of"), "{e}");
         }
         let periodic = PeriodicPart {
             lattice: Lattice {
