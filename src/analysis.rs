@@ -96,7 +96,9 @@ pub struct AnalysisOptions {
     /// Where a capture larger than [`RANGE_MAP_MAX_SIDE`] keeps its range map and the
     /// exemplar beside it; `None` (the default): the whole capture averaged down where its
     /// relief varies more at the scales a window's patches would cut through than finer than
-    /// the averaged samples ([`choose_layout`]), else the window.
+    /// the averaged samples ([`choose_layout`]), else the window; where the whole capture's
+    /// exemplar fails the exemplar check, the window is analysed too, and kept if the judge
+    /// finds it closer ([`analyze`]).
     pub relief_layout: Option<ReliefLayout>,
 }
 
@@ -223,11 +225,17 @@ pub fn analyze(
     options: &AnalysisOptions,
     progress: &dyn Progress,
 ) -> Result<(MaterialModel, AnalysisReport)> {
-    let (model, report, layout) = analyze_in(btf, options, progress)?;
-    // The whole capture, chosen for its relief, is kept only if its exemplar earned its place
-    // at the check: else the window's exemplar may (the clay-leaf capture: x1.02 the
-    // another-crop level averaged whole without one, x0.93 with the window's), and without
-    // one either, the averaged map keeps all of the relief.
+    let Analysed {
+        model,
+        report,
+        layout,
+        judged,
+    } = analyze_in(btf, options, progress)?;
+    // The whole capture, chosen for its relief, keeps it without an exemplar where its
+    // exemplar did not earn its place at the check; the window's exemplar may still, and is
+    // kept where the judge finds it closer at the same pairs (the clay-leaf capture: x1.02 the
+    // another-crop level averaged whole without one, x0.93 with the window's; painted-door's
+    // window exemplar passed its own check, but the averaged map alone was closer).
     if layout == Some(ReliefLayout::Whole)
         && options.relief_layout.is_none()
         && model.exemplar().is_none()
@@ -236,21 +244,31 @@ pub fn analyze(
             relief_layout: Some(ReliefLayout::Window),
             ..options.clone()
         };
-        let (windowed, report, _) = analyze_in(btf, &window, progress)?;
-        if windowed.exemplar().is_some() {
-            return Ok((windowed, report));
+        let windowed = analyze_in(btf, &window, progress)?;
+        if windowed.model.exemplar().is_some()
+            && let [Some(whole), Some(window_distance)] =
+                judged_distances(btf, &[&model, &windowed.model], &judged)?[..]
+            && window_distance < whole
+        {
+            return Ok((windowed.model, windowed.report));
         }
     }
     Ok((model, report))
 }
 
-/// [`analyze`] with the range map's layout as chosen or asked for (`None` without a layout to
-/// choose: no exemplar wanted, or no range map).
-fn analyze_in(
-    btf: &Btf,
-    options: &AnalysisOptions,
-    progress: &dyn Progress,
-) -> Result<(MaterialModel, AnalysisReport, Option<ReliefLayout>)> {
+/// One run of [`analyze_in`].
+struct Analysed {
+    model: MaterialModel,
+    report: AnalysisReport,
+    /// The range map's layout as chosen or asked for; `None` without a layout to choose (no
+    /// exemplar wanted, or no range map).
+    layout: Option<ReliefLayout>,
+    /// The (view, light) pairs the exemplar was judged at.
+    judged: Vec<(usize, usize)>,
+}
+
+/// [`analyze`] with the range map's layout as chosen or asked for.
+fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> Result<Analysed> {
     let direction_share = options.direction_share.unwrap_or(if btf.views().len() > 1 {
         crate::decompose::cluster::DIRECTION_SHARE
     } else {
@@ -574,7 +592,12 @@ fn analyze_in(
     let model = with_pair_gains(model, &measured_luminance)?;
     let (model, trimmed) = within_budget(model, options.max_bytes, &measured_luminance)?;
     report.warnings.extend(trimmed);
-    Ok((model, report, chosen))
+    Ok(Analysed {
+        model,
+        report,
+        layout: chosen,
+        judged,
+    })
 }
 
 /// The measured L* quantiles of every light's image in `view` ([`LightLightness`]).
@@ -643,24 +666,8 @@ fn judged_exemplar(
     if candidates.len() == 1 {
         return Ok(candidates.swap_remove(0).0);
     }
-    let mut distances = vec![Some(0.0); candidates.len()];
-    for &(v, l) in judged {
-        let measured = btf.image(v, l)?;
-        let (Some(view), Some(light)) = (btf.views().get(v), btf.lights().get(l)) else {
-            continue;
-        };
-        let (_, h, w) = measured.dim();
-        let (y0, x0, rows, cols) = centred_window(h, w, JUDGED_SIDE);
-        let measured = measured
-            .slice(ndarray::s![.., y0..y0 + rows, x0..x0 + cols])
-            .to_owned();
-        let scales = crate::eval::judge::scales_for(rows.min(cols));
-        let reference = crate::eval::judge::Signature::of(&measured, scales).ok();
-        for (sum, (candidate, _)) in distances.iter_mut().zip(&candidates) {
-            let d = structure_distance(candidate, reference.as_ref(), view, light, (rows, cols))?;
-            *sum = sum.zip(d).map(|(s, d)| s + d);
-        }
-    }
+    let models: Vec<&MaterialModel> = candidates.iter().map(|(m, _)| m).collect();
+    let distances = judged_distances(btf, &models, judged)?;
     // Too small to judge: no evidence either way, so the fewest parts.
     let best = distances
         .into_iter()
@@ -675,6 +682,35 @@ fn judged_exemplar(
         })
         .unwrap_or(0);
     Ok(candidates.swap_remove(best).0)
+}
+
+/// Per model, its structure distance summed over the `judged` pairs (seed 1, on the measured
+/// images' centred crop of at most [`JUDGED_SIDE`]); `None` where an image is too small to
+/// judge.
+fn judged_distances(
+    btf: &Btf,
+    models: &[&MaterialModel],
+    judged: &[(usize, usize)],
+) -> Result<Vec<Option<f64>>> {
+    let mut distances = vec![Some(0.0); models.len()];
+    for &(v, l) in judged {
+        let measured = btf.image(v, l)?;
+        let (Some(view), Some(light)) = (btf.views().get(v), btf.lights().get(l)) else {
+            continue;
+        };
+        let (_, h, w) = measured.dim();
+        let (y0, x0, rows, cols) = centred_window(h, w, JUDGED_SIDE);
+        let measured = measured
+            .slice(ndarray::s![.., y0..y0 + rows, x0..x0 + cols])
+            .to_owned();
+        let scales = crate::eval::judge::scales_for(rows.min(cols));
+        let reference = crate::eval::judge::Signature::of(&measured, scales).ok();
+        for (sum, model) in distances.iter_mut().zip(models) {
+            let d = structure_distance(model, reference.as_ref(), view, light, (rows, cols))?;
+            *sum = sum.zip(d).map(|(s, d)| s + d);
+        }
+    }
+    Ok(distances)
 }
 
 /// Whether the judge sees `btf`'s images at two scales or more (at least 64 pixels a side):
