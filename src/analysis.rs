@@ -1723,24 +1723,20 @@ mod tests {
             truth.height.mapv(f64::from)
         };
         // The stones and the sponge's cells are larger than a 128^2 window's patches at
-        // 256^2; the leather's relief is its fine creases.
-        assert_eq!(
-            choose_layout(&heights(SyntheticMaterial::Stones, 256)),
-            ReliefLayout::Whole
-        );
-        assert_eq!(
-            choose_layout(&heights(SyntheticMaterial::Sponge, 256)),
-            ReliefLayout::Whole
-        );
-        assert_eq!(
-            choose_layout(&heights(SyntheticMaterial::Leather, 256)),
-            ReliefLayout::Window
-        );
-        // Within the window there is nothing to average.
-        assert_eq!(
-            choose_layout(&heights(SyntheticMaterial::Stones, 128)),
-            ReliefLayout::Window
-        );
+        // 256^2; the leather's relief is its fine creases; within the window there is nothing
+        // to average.
+        for (material, side, layout) in [
+            (SyntheticMaterial::Stones, 256, ReliefLayout::Whole),
+            (SyntheticMaterial::Sponge, 256, ReliefLayout::Whole),
+            (SyntheticMaterial::Leather, 256, ReliefLayout::Window),
+            (SyntheticMaterial::Stones, 128, ReliefLayout::Window),
+        ] {
+            assert_eq!(
+                choose_layout(&heights(material, side)),
+                layout,
+                "{material:?} at {side}^2"
+            );
+        }
     }
 
     #[test]

@@ -1371,18 +1371,21 @@ mod tests {
         }
     }
 
+    /// An exemplar record: `header`, then `last` if any, no deviations and a mean of one code.
+    fn exemplar_record(header: &[u8], last: Option<u8>) -> Vec<u8> {
+        let mut w = Writer(header.to_vec());
+        w.0.extend(last);
+        w.u8(0);
+        w.f32(40.0);
+        w.f32(1.0);
+        w.u8(10);
+        w.0
+    }
+
     #[test]
     fn an_exemplar_names_its_coarse_source_from_version_11() {
-        // Flag 1, a 1 x 1 crop, 8-bit deviations, [coarse source,] no deviations, the mean.
-        let record = |coarse: Option<u8>| {
-            let mut w = Writer(vec![1, 1, 0, 1, 0, 8]);
-            w.0.extend(coarse);
-            w.u8(0);
-            w.f32(40.0);
-            w.f32(1.0);
-            w.u8(10);
-            w.0
-        };
+        // Flag 1, a 1 x 1 crop, 8-bit deviations, [coarse source,] ...
+        let record = |coarse: Option<u8>| exemplar_record(&[1, 1, 0, 1, 0, 8], coarse);
         let read = |bytes: &[u8], version| read_exemplar(&mut Reader::new(bytes), 1, version);
         let coarse = |bytes: &[u8], version| read(bytes, version).unwrap().unwrap().coarse;
         assert_eq!(coarse(&record(None), 10), CoarseSource::Mrf);
@@ -1394,17 +1397,8 @@ mod tests {
 
     #[test]
     fn an_exemplar_names_its_step_from_version_14() {
-        // Flag 1, a 1 x 1 crop, 8-bit deviations, coarse source 0, [step,] no deviations, the
-        // mean.
-        let record = |step: Option<u8>| {
-            let mut w = Writer(vec![1, 1, 0, 1, 0, 8, 0]);
-            w.0.extend(step);
-            w.u8(0);
-            w.f32(40.0);
-            w.f32(1.0);
-            w.u8(10);
-            w.0
-        };
+        // Flag 1, a 1 x 1 crop, 8-bit deviations, coarse source 0, [step,] ...
+        let record = |step: Option<u8>| exemplar_record(&[1, 1, 0, 1, 0, 8, 0], step);
         let read = |bytes: &[u8], version| read_exemplar(&mut Reader::new(bytes), 1, version);
         let step = |bytes: &[u8], version| read(bytes, version).unwrap().unwrap().step;
         assert_eq!(step(&record(None), 13), 1);
