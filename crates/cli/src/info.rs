@@ -149,13 +149,18 @@ fn model_parts(m: &MaterialModel) -> Vec<ModelPart> {
             CoarseSource::Laid => "the laid crops",
         };
         let chroma = e.chroma.as_ref().map_or(String::new(), |c| {
-            format!(", chroma in {} x {} blocks", c.step, c.step)
+            let side = c.step * e.step;
+            format!(", chroma in {side} x {side} pixel blocks")
         });
+        let sampling = match e.step {
+            1 => String::new(),
+            step => format!(", one sample every {step} pixels"),
+        };
         add(
             "exemplar",
             format::exemplar_bytes(m),
             format!(
-                "{} x {} L* crops (mean and {} deviations){chroma}; coarse L* from {coarse}",
+                "{} x {} L* crops (mean and {} deviations){sampling}{chroma}; coarse L* from {coarse}",
                 e.cols,
                 e.rows,
                 e.lightness.basis.len().saturating_sub(1)
