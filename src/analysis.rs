@@ -74,9 +74,10 @@ pub struct AnalysisOptions {
     /// Largest side of the structure exemplar (0: none; see [`crate::model::Exemplar`]),
     /// stored when the model works in CIE Lab and has no range map, or has one and the
     /// exemplar brings the synthesis closer to the measured images (judged at analysis). Beside
-    /// a range map the exemplar is the map's centred window, at most [`RANGE_MAP_MAX_SIDE`] a
-    /// side, which the map then keeps at every pixel (see [`estimate_range_map`]); a side
-    /// smaller than that window leaves no exemplar beside a range map. `None` (the default):
+    /// a range map the exemplar covers the map's region: its centred window, at most
+    /// [`RANGE_MAP_MAX_SIDE`] a side, at every pixel, or the whole capture averaged to that
+    /// side ([`AnalysisOptions::relief_layout`], see [`estimate_range_map`]); a side smaller
+    /// than the window leaves no exemplar beside a range map. `None` (the default):
     /// the side whose crops fill the exemplar's byte budget, [`exemplar_side_for`].
     pub exemplar_side: Option<usize>,
     /// Look for a lattice (a weave, tiles, a brick bond) and, when one is found, store each
@@ -129,8 +130,8 @@ pub const EXEMPLAR_SIDE: usize = 128;
 pub const MAX_EXEMPLAR_SIDE: usize = 1024;
 
 /// Largest stored range-map side, samples: a larger capture keeps a window of this side at
-/// every pixel beside an exemplar, else all of it averaged down (a 128 x 128 map is 32 KiB in
-/// the model file).
+/// every pixel or all of it averaged down ([`ReliefLayout`]; a 128 x 128 map is 32 KiB in the
+/// model file).
 pub const RANGE_MAP_MAX_SIDE: usize = 128;
 
 impl Default for AnalysisOptions {
@@ -323,9 +324,10 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
     let mut report = AnalysisReport::default();
     // Photometric stereo needs three lights: with fewer (a photograph) there is no relief to
     // estimate, and the exemplar carries the structure; that is no repair to report.
-    // An exemplar beside a range map is cut where the map is kept at every pixel: the map's
-    // window (see estimate_range_map). An exemplar side asked for below that window's would
-    // shrink the relief to it, so it leaves the map whole and the exemplar out.
+    // An exemplar beside a range map is cut over the map's region, at its step: the window at
+    // every pixel or the whole capture averaged ([`ReliefLayout`], see estimate_range_map). An
+    // exemplar side asked for below the window's would shrink the relief to it, so it leaves
+    // the map whole and the exemplar out.
     let wanted = options.exemplar_side != Some(0) && options.colour_space == ColourSpace::Lab;
     let layout = (wanted
         && options
@@ -353,7 +355,7 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
     // The frontal view's images are registered with the range map: their relief shading is
     // divided out before fitting, since synthesis applies it again (geometry::relight).
     let frontal = geometry::frontal_view(btf);
-    let (range_map, registered, window) = match estimate {
+    let (range_map, registered, map_region) = match estimate {
         Some(e) => (Some(e.map), Some(e.registered), e.region),
         None => (None, None, None),
     };
@@ -400,17 +402,17 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
     let exemplar_side = options
         .exemplar_side
         .unwrap_or_else(|| exemplar_side_for(clustering.representatives.len()));
-    // With a range map kept at every pixel of a window, the exemplar is that window, registered
-    // with the map, and synthesis lays it with the relief's own patches (geometry::quilt_laid),
-    // so colour and relief structure line up; a near-regular material's relief is laid on its
-    // lattice instead.
-    let registered_window = window.filter(|_| lattice.is_none());
+    // Beside a range map, the exemplar covers the map's region at its step (a window at every
+    // pixel, or the whole capture averaged), registered with the map, and synthesis lays it
+    // with the relief's own patches (geometry::quilt_laid), so colour and relief structure
+    // line up; a near-regular material's relief is laid on its lattice instead.
+    let registered_region = map_region.filter(|_| lattice.is_none());
     // A near-regular material's exemplar holds the fine detail around its period (fibres on
     // the threads), cut at the lattice's phase origin (the image's first pixel) so that
     // synthesis lays its patches in step with the tile (geometry::Phase).
-    let crop = ((range_map.is_none() || registered_window.is_some() || lattice.is_some())
+    let crop = ((range_map.is_none() || registered_region.is_some() || lattice.is_some())
         && wanted)
-        .then(|| match (lattice, registered_window) {
+        .then(|| match (lattice, registered_region) {
             (Some(_), _) => {
                 let side = exemplar_side.min(LATTICE_EXEMPLAR_SIDE);
                 Region::at_every_texel((0, 0, h.min(side), w.min(side)))

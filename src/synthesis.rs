@@ -153,7 +153,6 @@ impl Scale {
             Self::Stepped {
                 torus: (tr, tc),
                 output: (rows, cols),
-                ..
             } => cropped(resample_periodic(&field, tr, tc), rows, cols),
         }
     }

@@ -163,11 +163,12 @@ pub struct Args {
     /// 128 for several subspace images (the mean, 16 KiB, and up to six deviations, 8 KiB
     /// each).
     /// Stored when there is no range map (a photograph), and beside a range map when a check
-    /// at analysis finds it brings the synthesis closer to the measured images. The range map
-    /// then keeps the same centred window (at most 128 x 128) at every pixel, instead of a
-    /// larger capture's whole map averaged down to 128 samples a side, and the two are laid
-    /// with the relief's own patches, so colour and relief line up (a side below that window
-    /// stores no exemplar beside a range map). The check synthesizes
+    /// at analysis finds it brings the synthesis closer to the measured images. The exemplar
+    /// then covers the range map's region, a centred window (at most 128 x 128) at every pixel
+    /// or a larger capture's whole map averaged down to 128 samples a side (see
+    /// --relief-layout), and the two are laid with the relief's own patches, so colour and
+    /// relief line up (a side below that window stores no exemplar beside a range map). The
+    /// check synthesizes
     /// and judges up to eight subspace images two or three times, on the measured images'
     /// centred crop of at most 256 x 256: a 256^2 built-in sponge (81 x 81 images) took 27 s
     /// to analyse against 10 s with --exemplar 0, the 310^2 clay-leaf RTI capture 15 s
