@@ -168,11 +168,10 @@ pub struct Args {
     /// or a larger capture's whole map averaged down to 128 samples a side (see
     /// --relief-layout), and the two are laid with the relief's own patches, so colour and
     /// relief line up (a side below that window stores no exemplar beside a range map). The
-    /// check synthesizes
-    /// and judges up to eight subspace images two or three times, on the measured images'
-    /// centred crop of at most 256 x 256: a 256^2 built-in sponge (81 x 81 images) took 27 s
-    /// to analyse against 10 s with --exemplar 0, the 310^2 clay-leaf RTI capture 15 s
-    /// against 2 s, on a 2-core machine. The quilt costs synthesis time: a 1024x1024 image of
+    /// check synthesizes and judges up to eight subspace images two or three times, on the
+    /// measured images' centred crop of at most 256 x 256: a 256^2 built-in sponge (81 x 81
+    /// images) took 21 s to analyse against 10 s with --exemplar 0, the 310^2 clay-leaf RTI
+    /// capture 37 s (both layouts, see --relief-layout) against 2 s, on a 2-core machine. The quilt costs synthesis time: a 1024x1024 image of
     /// a photograph's model took 0.52 s with it and 0.32 s without on a 2-core machine.
     #[arg(long)]
     exemplar: Option<usize>,
@@ -221,7 +220,8 @@ pub struct Args {
     /// is lost) or `auto` (the default: whole where the relief varies more at the scales a
     /// window's patches cut through than finer than the averaged samples; where the whole
     /// capture's exemplar then fails analysis's check, the window is analysed too and kept if
-    /// the judge finds it closer, which doubles the analysis time: clay-leaf 15 s -> 40 s).
+    /// the judge finds it closer, which more than doubles the analysis time: the clay-leaf RTI
+    /// capture 15 s -> 37 s, painted-door 23 s -> 55 s).
     /// Measured on the built-in materials at 256^2, enlarged to 512^2 (nine frontal lights,
     /// seed 1, x the another-crop level, window -> whole): stones 2.60 -> 1.71 (the window's
     /// patches cut the stones into blocks), sponge 2.04 -> 1.48, leather 2.00 -> 3.69 (its fine
