@@ -676,8 +676,6 @@ struct Guide<'a> {
     relief: &'a Array2<f64>,
     relief_weight: f64,
     colour: Vec<Array2<f64>>,
-    /// The relief and the scaled companions, each row-major (what the misfits scan).
-    planes: Vec<Vec<f64>>,
 }
 
 impl<'a> Guide<'a> {
@@ -703,15 +701,10 @@ impl<'a> Guide<'a> {
                 .collect();
             (inverse(relief.var(0.0)), colour)
         };
-        let planes = std::iter::once(relief)
-            .chain(&colour)
-            .map(|plane| plane.iter().copied().collect())
-            .collect();
         Self {
             relief,
             relief_weight,
             colour,
-            planes,
         }
     }
 
@@ -724,7 +717,7 @@ impl<'a> Guide<'a> {
         inside: bool,
     ) -> Vec<(f64, f64)> {
         let n = known.at.len().max(1) as f64;
-        let sums = match self.planes.len() {
+        let sums = match 1 + self.colour.len() {
             1 => self.sums::<1>(candidates, known, inside),
             2 => self.sums::<2>(candidates, known, inside),
             3 => self.sums::<3>(candidates, known, inside),
@@ -762,8 +755,18 @@ impl<'a> Guide<'a> {
                 _ => runs.push((y * sc + x, i, 1)),
             }
         }
+        // The relief and the scaled companions row-major, borrowed (they are made here in
+        // standard layout).
+        let planes: Vec<_> = std::iter::once(self.relief)
+            .chain(&self.colour)
+            .map(|plane| plane.as_standard_layout())
+            .collect();
         let scan = Scan::<CH> {
-            planes: std::array::from_fn(|c| &self.planes[c][..]),
+            planes: std::array::from_fn(|c| {
+                planes[c]
+                    .as_slice()
+                    .expect("a standard layout is contiguous")
+            }),
             values: std::array::from_fn(|c| &known.values[c][..]),
             runs: &runs,
             at: &known.at,
@@ -1073,7 +1076,7 @@ mod tests {
                 .collect();
             let value = |k: usize, c: usize| ((k * 13 + c * 5) % 11) as f64 - 4.0;
             let known = Known {
-                values: (0..guide.planes.len())
+                values: (0..1 + guide.colour.len())
                     .map(|c| (0..at.len()).map(|k| value(k, c)).collect())
                     .collect(),
                 at,
