@@ -7,7 +7,7 @@
 //! and over the another-crop level, and the mean colour distance.
 //!
 //! Run: `cargo run --release --example judge_captures -- CAPTURE... [--clusters N]
-//! [--model KIND] [--no-lit-tables] [--no-light-tables] [--exemplar N]`, e.g.
+//! [--model KIND] [--no-lit-tables] [--no-light-tables] [--no-light-weights] [--exemplar N]`, e.g.
 //! `../shared/data/rti/*`; `--exemplar N` sets the exemplar's side (0: none).
 
 use btfmrf::analysis::{AnalysisOptions, analyze};
@@ -32,6 +32,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--model" => options.kind = args.next().ok_or("--model KIND")?.parse()?,
             "--no-lit-tables" => options.lit_matching = false,
             "--no-light-tables" => options.light_tables = false,
+            "--no-light-weights" => options.light_weights = false,
             "--exemplar" => {
                 options.exemplar_side = Some(args.next().ok_or("--exemplar N")?.parse()?)
             }

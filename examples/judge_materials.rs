@@ -8,7 +8,7 @@
 //! row above synthesized row, the nine lights left to right).
 //!
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
-//! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--no-light-tables] [--verbose]
+//! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--no-light-tables] [--no-light-weights] [--verbose]
 //! [--sheet DIR] [--seed N] [--pair-rank K] [--shadows attached|cast|auto]
 //! [--coarse laid|mrf|auto] [--view N] [--halfway]`; `--view N` judges in the Bonn set's
 //! view N instead of the frontal view 0 (1-6 at 15 degrees, 7-18 at 30, 19-36 at 45, 37-60 at
@@ -201,6 +201,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--no-colour-tables" => options.colour_matching = false,
             "--no-lit-tables" => options.lit_matching = false,
             "--no-light-tables" => options.light_tables = false,
+            "--no-light-weights" => options.light_weights = false,
             "--shadows" => {
                 options.shadows = match args.next().ok_or("--shadows attached|cast|auto")?.as_str()
                 {
@@ -332,6 +333,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 v.judgement.colour_lab
             );
             if verbose {
+                let [l, a, b] = v.judgement.colour_lab_channels;
+                println!("  colour per channel: L* {l:.2}, a* {a:.2}, b* {b:.2} Lab");
                 let crop = y.levels().crop.judgement.groups;
                 println!(
                     "  groups over the crop level ({}): {}",

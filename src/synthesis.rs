@@ -25,8 +25,7 @@ use crate::geometry::{
     resample_periodic, split_detail,
 };
 use crate::model::{
-    CoarseSource, Exemplar, LightLightness, LitMarginals, MaterialModel, ModelError, PeriodicPart,
-    Result,
+    CoarseSource, Exemplar, LightLightness, MaterialModel, ModelError, PeriodicPart, Result,
 };
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
@@ -51,6 +50,16 @@ pub struct SynthesisOptions {
 }
 
 impl SynthesisOptions {
+    /// How pyramids and blurs of the output treat its borders: wrapping around for a
+    /// tileable output, mirrored otherwise.
+    pub fn border(&self) -> Border {
+        if self.tileable {
+            Border::Periodic
+        } else {
+            Border::Mirror
+        }
+    }
+
     /// How differences of the output's relief treat its borders: wrapping around for a
     /// tileable output (its relief is periodic), edge samples repeated otherwise (a plain
     /// output's relief is cut from a larger torus, so its opposite edges do not meet).
@@ -351,11 +360,7 @@ impl MaterialModel {
             ModelError::parameter("subspace", format!("{k} of {}", self.subspaces().len()))
         })?;
         let shapes = Pyramid::shapes(o.rows, o.cols, s.levels.len());
-        let border = if o.tileable {
-            Border::Periodic
-        } else {
-            Border::Mirror
-        };
+        let border = o.border();
         // The exemplar's quilt does not depend on the bands: laid while they are drawn.
         let (bands, laid) = rayon::join(
             || {
@@ -448,15 +453,25 @@ impl MaterialModel {
                 channel.zip_mut_with(&tiled, |v, &t| *v = (f64::from(*v) * t) as f32);
             }
         }
-        let lit_light = usize::from(s.representative.1);
-        if let (Some(lit), Some(heights), Some(map)) = (&s.lit_marginals, heights, self.range_map())
-            && let Some(light) = self.lights().get(lit_light)
-            && let Some(factor) =
-                relief_factor(heights, o.edges(), light, map.shading_of(lit_light))
-        {
-            match_lit(&mut image, &factor, lit);
+        if let Some(heights) = heights {
+            self.match_lit(k, &mut image, heights, o.edges());
         }
         Ok(image)
+    }
+
+    /// Gives `image` subspace `k`'s lit lightness table ([`LitMarginals`]) relit by `heights`
+    /// for its representative's light; nothing without a table or a range map.
+    fn match_lit(&self, k: usize, image: &mut Array3<f32>, heights: &Array2<f64>, edges: Edges) {
+        let Some(s) = self.subspaces().get(k) else {
+            return;
+        };
+        let lit_light = usize::from(s.representative.1);
+        if let (Some(lit), Some(map)) = (&s.lit_marginals, self.range_map())
+            && let Some(light) = self.lights().get(lit_light)
+            && let Some(factor) = relief_factor(heights, edges, light, map.shading_of(lit_light))
+        {
+            match_lightness(image, Some(&factor), &lit.lightness, 1.0);
+        }
     }
 
     /// The measured (view, light) pairs around a requested pair and their weights: the 3
@@ -597,24 +612,7 @@ impl MaterialModel {
         view: &Direction,
         light: &Direction,
     ) -> Result<Array3<f32>> {
-        let o = &cache.options;
-        let mut out: Option<Array3<f32>> = None;
-        // Each measured pair brings its subspace image at its own brightness (its gain).
-        for (k, w) in self.weights_by_cluster(view, light, true)? {
-            let part = self.subspace_from_cache(cache, k)?;
-            match &mut out {
-                None => out = Some(part.mapv(|v| w as f32 * v)),
-                Some(out) => out.scaled_add(w as f32, part),
-            }
-        }
-        let mut out = out.unwrap_or_else(|| Array3::zeros((3, o.rows, o.cols)));
-        if let Some(heights) = &cache.heights {
-            let shading = self.bump_shading(light)?;
-            bump_relight(&mut out, heights, o.edges(), light, shading);
-            if let Some(warp) = parallax::view_warp(heights, o.edges(), view.vector()) {
-                out = warp.apply(&out);
-            }
-        }
+        let mut out = self.relit_image(cache, view, light)?;
         // The cluster's subspace image was matched at its representative's light only; the
         // measured lightness of the requested light itself finishes it.
         if let Some(tables) = self.light_lightness()
@@ -623,6 +621,103 @@ impl MaterialModel {
             match_lightness(&mut out, None, &table, share);
         }
         Ok(out)
+    }
+
+    /// [`MaterialModel::image_from_cache`] before the light tables: the subspace images
+    /// blended with their pairs' gains, given the lights' own detail, relit and seen from
+    /// the view.
+    pub(crate) fn relit_image(
+        &self,
+        cache: &SynthesisCache,
+        view: &Direction,
+        light: &Direction,
+    ) -> Result<Array3<f32>> {
+        let o = &cache.options;
+        let mut out: Option<Array3<f32>> = None;
+        // Each measured pair brings its subspace image at its own brightness (its gain).
+        let weights = self.weights_by_cluster(view, light, true)?;
+        for (&k, &w) in &weights {
+            let part = self.subspace_from_cache(cache, k)?;
+            match &mut out {
+                None => out = Some(part.mapv(|v| w as f32 * v)),
+                Some(out) => out.scaled_add(w as f32, part),
+            }
+        }
+        let mut out = out.unwrap_or_else(|| Array3::zeros((3, o.rows, o.cols)));
+        if let Some(detail) = self.light_detail(cache, view, light)? {
+            // Chromaticity kept, as a shadow darkens; the colours then go back to the
+            // leading cluster's joint distribution, which the subspace image had before the
+            // detail changed (without it the built-in leather's b* spread grew 20 %), and to
+            // its lit lightness (the subspace image's last step, which the transfer undoes);
+            // the pairs' gains scale them as they scaled the blend.
+            shift_lightness(&mut out, &detail);
+            if let Some((&k, _)) = weights.iter().max_by(|a, b| a.1.total_cmp(b.1))
+                && let Some(c) = &self.subspaces()[k].colour_marginals
+            {
+                let mut planes = ColourSpace::Lab.planes(&out);
+                c.transfer(&mut planes, o.border());
+                out = ColourSpace::Lab.linear_image(&planes);
+                if let Some(heights) = &cache.heights {
+                    self.match_lit(k, &mut out, heights, o.edges());
+                }
+                let plain: f64 = self.weights_by_cluster(view, light, false)?.values().sum();
+                let gain = weights.values().sum::<f64>() / plain;
+                if gain.is_finite() && gain > 0.0 {
+                    out.mapv_inplace(|v| v * gain as f32);
+                }
+            }
+        }
+        if let Some(heights) = &cache.heights {
+            let shading = self.bump_shading(light)?;
+            bump_relight(&mut out, heights, o.edges(), light, shading);
+            if let Some(warp) = parallax::view_warp(heights, o.edges(), view.vector()) {
+                out = warp.apply(&out);
+            }
+        }
+        Ok(out)
+    }
+
+    /// The L* detail the measured lights around `light` have of their own beyond their
+    /// clusters' ([`LightWeights`](crate::model::LightWeights)): the exemplar's deviations
+    /// laid with the lights' weights less their subspaces', kept finer than a patch where
+    /// the MRF brings the coarse L*; `None` where there is nothing to add.
+    fn light_detail(
+        &self,
+        cache: &SynthesisCache,
+        view: &Direction,
+        light: &Direction,
+    ) -> Result<Option<Array2<f64>>> {
+        let (Some(e), Some(Some(laid))) = (self.exemplar(), cache.structure.get()) else {
+            return Ok(None);
+        };
+        let Some(lights) = &e.light_weights else {
+            return Ok(None);
+        };
+        let mut delta = vec![0.0; e.lightness.basis.len()];
+        for (v, l, w) in self.neighbouring_pairs(view, light)? {
+            let k = self.cluster_of(v, l)?;
+            if v != lights.view {
+                continue;
+            }
+            if let (Some(own), Some(cluster)) = (lights.weights.get(l), e.lightness.weights.get(k))
+            {
+                for (d, (a, b)) in delta[1..].iter_mut().zip(own.iter().zip(cluster)) {
+                    *d += w * f64::from(a - b);
+                }
+            }
+        }
+        if delta.iter().all(|&d| d == 0.0) {
+            return Ok(None);
+        }
+        let detail = laid.lightness(&delta);
+        Ok(Some(match e.coarse {
+            CoarseSource::Mrf => {
+                let sigma = detail_scale(e.rows, e.cols) * e.step as f64;
+                let coarse = split_detail(&detail, sigma, cache.options.tileable).0;
+                detail - coarse
+            }
+            CoarseSource::Laid => detail,
+        }))
     }
 
     /// Subspace image `k` from `cache` (which must come from this model), synthesized on
@@ -784,14 +879,6 @@ impl MaterialModel {
     }
 }
 
-/// Scales each pixel of `image` so that, relit by the shading `factor`, its L* marginal is the
-/// measured representative's ([`LitMarginals`]); the chromaticity is kept (matching a* and b*
-/// on their own made colours the material does not have, and pushed the leather's frontal
-/// representatives off-chroma).
-fn match_lit(image: &mut Array3<f32>, factor: &Array2<f64>, lit: &LitMarginals) {
-    match_lightness(image, Some(factor), &lit.lightness, 1.0);
-}
-
 /// Scales each pixel of `image`, chromaticity kept, so that its L* (seen through the shading
 /// `factor` when given) moves `share` (0..=1) of the way to the L* that gives the image the
 /// quantiles `lightness` (at [`marginals::band_probabilities`]).
@@ -812,13 +899,37 @@ fn match_lightness(
         .and(&current)
         .par_for_each(|r, &l| {
             let wanted = l + share * (map.apply(l) - l);
-            let target = f64::from(crate::color::luminance_of_lightness(wanted as f32));
-            *r = if *r > LIT_DARK { target / *r } else { 1.0 };
+            *r = luminance_ratio(*r, wanted);
         });
+    scale_pixels(image, &ratio);
+}
+
+/// Adds `delta` to the L* of each pixel of `image`, chromaticity kept (as shading would
+/// darken or brighten it).
+fn shift_lightness(image: &mut Array3<f32>, delta: &Array2<f64>) {
+    let mut ratio = crate::geometry::relight::luminance(image);
+    ndarray::Zip::from(&mut ratio)
+        .and(delta)
+        .par_for_each(|r, &d| {
+            let l = f64::from(crate::color::lightness(*r as f32));
+            *r = luminance_ratio(*r, (l + d).max(0.0));
+        });
+    scale_pixels(image, &ratio);
+}
+
+/// The factor that takes a pixel of luminance `y` to the lightness `wanted` (1 for a pixel
+/// too dark to scale).
+fn luminance_ratio(y: f64, wanted: f64) -> f64 {
+    let target = f64::from(crate::color::luminance_of_lightness(wanted as f32));
+    if y > LIT_DARK { target / y } else { 1.0 }
+}
+
+/// Multiplies every channel of `image` by `ratio`, pixel by pixel.
+fn scale_pixels(image: &mut Array3<f32>, ratio: &Array2<f64>) {
     image
         .axis_iter_mut(Axis(0))
         .into_par_iter()
-        .for_each(|mut channel| channel.zip_mut_with(&ratio, |v, &r| *v *= r as f32));
+        .for_each(|mut channel| channel.zip_mut_with(ratio, |v, &r| *v *= r as f32));
 }
 
 /// The L* quantiles `tables` holds for `light` seen from `view`, blended over the nearest
@@ -960,12 +1071,7 @@ pub fn bump_relight(
     let Some(factor) = relief_factor(heights, border, light, shading) else {
         return;
     };
-    image
-        .axis_iter_mut(Axis(0))
-        .into_par_iter()
-        .for_each(|mut channel| {
-            channel.zip_mut_with(&factor, |v, &s| *v *= s as f32);
-        });
+    scale_pixels(image, &factor);
 }
 
 /// The factor [`bump_relight`] multiplies every channel by: the relief's shading factor
@@ -985,6 +1091,7 @@ pub fn relief_factor(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::LitMarginals;
 
     #[test]
     fn relighting_at_the_measured_light_undoes_the_de_shading_even_in_deep_shadow() {
@@ -1035,7 +1142,7 @@ mod tests {
             lightness: probabilities.iter().map(|p| 30.0 + 50.0 * p).collect(),
         };
         let before = image.clone();
-        match_lit(&mut image, &factor, &lit);
+        match_lightness(&mut image, Some(&factor), &lit.lightness, 1.0);
         // Each pixel scaled as a whole: its chromaticity is kept.
         for y in 0..h {
             for x in 0..w {

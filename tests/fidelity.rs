@@ -363,6 +363,7 @@ fn the_leather_takes_its_coarse_variation_from_the_laid_crops() {
     let mut parts = model.clone().into_parts();
     parts.exemplar = Some(Exemplar {
         coarse: CoarseSource::Mrf,
+        light_weights: None,
         ..exemplar
     });
     let mrf = MaterialModel::new(parts).unwrap();
@@ -463,4 +464,63 @@ fn a_capture_larger_than_the_window_keeps_its_structures_whole_with_its_relief()
     let ratio = (log_ratio / lights.len() as f64).exp();
     println!("whole over window: {ratio:.3}");
     assert!(ratio < 0.85, "whole over window {ratio:.3}");
+}
+
+#[test]
+fn every_light_brings_its_own_exemplar_detail() {
+    // A cluster shares one subspace image among lights whose cast shadows and highlights
+    // differ (the built-in sponge's 15/120 light is represented by 15/0 and others); each
+    // light's own weights on the exemplar's deviations bring its own detail back.
+    let side = 128;
+    let sponge = Btf::synthetic(SyntheticMaterial::Sponge, side, 5).unwrap();
+    let another = Btf::synthetic(SyntheticMaterial::Sponge, side, 6).unwrap();
+    let model = |light_weights: bool| {
+        let options = AnalysisOptions {
+            clusters: 8,
+            light_weights,
+            ..AnalysisOptions::default()
+        };
+        analyze(&sponge, &options, &NoProgress).unwrap().0
+    };
+    let (own, shared) = (model(true), model(false));
+    let weights = own.exemplar().and_then(|e| e.light_weights.as_ref());
+    assert_eq!(
+        weights.map(|w| w.weights.len()),
+        Some(sponge.lights().len())
+    );
+    assert!(shared.exemplar().is_some_and(|e| e.light_weights.is_none()));
+    let o = SynthesisOptions {
+        rows: side as usize,
+        cols: side as usize,
+        seed: 1,
+        tileable: false,
+    };
+    let view = *sponge.views().get(0).unwrap();
+    let mut log_ratio = 0.0;
+    for (theta, phi) in JUDGED_LIGHTS {
+        let light = Direction::new(theta, phi);
+        let l = sponge.lights().find(&light, 0.5).unwrap();
+        let y = Yardstick::from_samples(
+            &sponge.image(0, l).unwrap(),
+            &another.image(0, l).unwrap(),
+            None,
+            1,
+        )
+        .unwrap();
+        let [a, b] = [&own, &shared].map(|m| {
+            y.judge(&m.synthesize_image(&view, &light, &o).unwrap())
+                .unwrap()
+        });
+        println!(
+            "sponge light {theta}/{phi}: own x{:.2} ({:.2} Lab), shared x{:.2} ({:.2} Lab) the crop level",
+            a.structure_vs_crop,
+            a.judgement.colour_lab,
+            b.structure_vs_crop,
+            b.judgement.colour_lab
+        );
+        log_ratio += (a.structure_vs_crop / b.structure_vs_crop).ln();
+    }
+    let ratio = (log_ratio / JUDGED_LIGHTS.len() as f64).exp();
+    println!("own over shared: {ratio:.3}");
+    assert!(ratio < 0.95, "own over shared {ratio:.3}");
 }

@@ -108,7 +108,8 @@ pub(crate) fn sample_quantiles(
     if sample.is_empty() {
         return vec![0.0; probabilities.len()];
     }
-    sample.sort_by(f64::total_cmp);
+    // Unstable is the same order: values equal under `total_cmp` have the same bits.
+    sample.sort_unstable_by(f64::total_cmp);
     let last = (sample.len() - 1) as f64;
     // Interpolated as a + (b - a) f, exact where neighbours are equal, and made non-decreasing
     // against rounding (a flat plane gave tables decreasing in the last bit).

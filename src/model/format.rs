@@ -5,7 +5,7 @@ use std::path::Path;
 
 use super::material::{
     BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LightLightness,
-    LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_EXEMPLAR_STEP,
+    LightWeights, LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_EXEMPLAR_STEP,
     MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, PeriodicPart, Principal,
     RangeMap, SubspaceModel,
 };
@@ -31,8 +31,9 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// files (no lit lightness tables), version 8 files (exemplar L* deviations always 8-bit),
 /// version 9 files (no cast shadows), version 10 files (an exemplar's coarse variation
 /// always the MRF's), version 11 files (no light lightness tables), version 12 files (no
-/// chroma spreads) and version 13 files (an exemplar at every texel) are still read.
-pub const VERSION: u16 = 14;
+/// chroma spreads), version 13 files (an exemplar at every texel) and version 14 files (no
+/// light weights on the exemplar) are still read.
+pub const VERSION: u16 = 15;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -145,7 +146,71 @@ pub fn to_payload(model: &MaterialModel) -> Vec<u8> {
     write_pair_gains(&mut w, model);
     write_lit_marginals(&mut w, model);
     write_light_lightness(&mut w, model.light_lightness());
+    write_light_weights(
+        &mut w,
+        model.exemplar().and_then(|e| e.light_weights.as_ref()),
+    );
     w.0
+}
+
+/// The version 15 light weights of the exemplar ([`LightWeights`]): a flag, then the view
+/// (u16) and, per L* deviation, every light's weight on it quantised to 8-bit codes.
+fn write_light_weights(w: &mut Writer, weights: Option<&LightWeights>) {
+    let Some(l) = weights else {
+        w.u8(0);
+        return;
+    };
+    w.u8(1);
+    w.u16(l.view as u16);
+    for column in light_columns(&l.weights) {
+        write_quantised(w, &column, Storage::Byte);
+    }
+}
+
+/// The weights of every light on each deviation in turn (the file's order).
+fn light_columns(rows: &[Vec<f32>]) -> Vec<Vec<f64>> {
+    let deviations = rows.first().map_or(0, Vec::len);
+    (0..deviations)
+        .map(|j| rows.iter().map(|r| f64::from(r[j])).collect())
+        .collect()
+}
+
+/// Every light's weights as a version 15 file stores ([`write_light_weights`]) and reads them
+/// back.
+pub fn as_stored_light_weights(rows: &[Vec<f32>]) -> Vec<Vec<f32>> {
+    let columns: Vec<Vec<f32>> = light_columns(rows)
+        .iter()
+        .map(|c| {
+            stored_as(
+                &c.iter().map(|&v| v as f32).collect::<Vec<_>>(),
+                Storage::Byte,
+            )
+        })
+        .collect();
+    (0..rows.len())
+        .map(|l| columns.iter().map(|c| c[l]).collect())
+        .collect()
+}
+
+/// Reads what [`write_light_weights`] wrote, for `lights` lights and `deviations` L*
+/// deviations.
+fn read_light_weights(
+    r: &mut Reader,
+    lights: usize,
+    deviations: usize,
+) -> Parse<Option<LightWeights>> {
+    if r.u8_at_most(1, "light weights flag")? == 0 {
+        return Ok(None);
+    }
+    let view = usize::from(r.u16()?);
+    r.ensure(deviations, 8 + lights, "light weights")?;
+    let columns = (0..deviations)
+        .map(|_| read_stored(r, lights, Storage::Byte, "light weight"))
+        .collect::<Parse<Vec<_>>>()?;
+    let weights = (0..lights)
+        .map(|l| columns.iter().map(|c| c[l]).collect())
+        .collect();
+    Ok(Some(LightWeights { view, weights }))
 }
 
 /// The version 12 light lightness tables ([`LightLightness`]): a flag, then the view (u16) and
@@ -468,7 +533,11 @@ pub fn exemplar_bytes(model: &MaterialModel) -> usize {
             1 + principal_bytes(&c.fields, (Storage::Byte, Storage::Byte))
         });
         let lightness = (Storage::Byte, Storage::of(e.deviation_codes));
-        6 + principal_bytes(&e.lightness, lightness) + chroma
+        let lights = e.light_weights.as_ref().map_or(0, |l| {
+            let deviations = l.weights.first().map_or(0, Vec::len);
+            2 + deviations * (8 + l.weights.len())
+        });
+        6 + principal_bytes(&e.lightness, lightness) + chroma + lights
     })
 }
 
@@ -868,6 +937,18 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     } else {
         None
     };
+    let mut exemplar = exemplar;
+    if version >= 15 {
+        let deviations = exemplar
+            .as_ref()
+            .map_or(0, |e| e.lightness.basis.len().saturating_sub(1));
+        let weights = read_light_weights(&mut r, lights.len(), deviations)?;
+        match exemplar.as_mut() {
+            Some(e) => e.light_weights = weights,
+            None if weights.is_some() => return Err("light weights without an exemplar".into()),
+            None => {}
+        }
+    }
     r.finish()?;
     MaterialModel::new(MaterialParts {
         views,
@@ -1131,6 +1212,7 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
                 deviation_codes,
                 chroma,
                 coarse,
+                light_weights: None,
             }))
         }
         f => Err(format!("unknown exemplar flag {f}")),
@@ -1406,6 +1488,37 @@ mod tests {
         for bad in [0, MAX_EXEMPLAR_STEP as u8 + 1] {
             let e = read(&record(Some(bad)), 14).unwrap_err();
             assert!(e.contains(&format!("exemplar step of {bad}")), "{e}");
+        }
+    }
+
+    #[test]
+    fn light_weights_read_back_as_stored_and_refuse_a_short_record() {
+        let rows: Vec<Vec<f32>> = (0..4)
+            .map(|l| vec![l as f32 * 0.25, -1.5 + 0.1 * l as f32, 3.0])
+            .collect();
+        let weights = LightWeights {
+            view: 2,
+            weights: as_stored_light_weights(&rows),
+        };
+        for (a, b) in weights.weights.iter().flatten().zip(rows.iter().flatten()) {
+            assert!((a - b).abs() < 2e-3, "{a} stored for {b}");
+        }
+        let mut w = Writer(Vec::new());
+        write_light_weights(&mut w, Some(&weights));
+        assert_eq!(w.0.len(), 1 + 2 + 3 * (8 + 4));
+        let read = read_light_weights(&mut Reader::new(&w.0), 4, 3).unwrap();
+        assert_eq!(read, Some(weights));
+        // One byte without; more lights or deviations than the bytes hold: refused.
+        let mut none = Writer(Vec::new());
+        write_light_weights(&mut none, None);
+        assert_eq!(none.0, [0]);
+        assert_eq!(
+            read_light_weights(&mut Reader::new(&none.0), 4, 3),
+            Ok(None)
+        );
+        for (lights, deviations) in [(5, 3), (4, 4)] {
+            let e = read_light_weights(&mut Reader::new(&w.0), lights, deviations).unwrap_err();
+            assert!(e.contains("light weight"), "{e}");
         }
     }
 

@@ -240,6 +240,44 @@ impl Principal {
         )
     }
 
+    /// Drops the last deviation and every weight on it; `false` where only the mean is left.
+    fn drop_deviation(&mut self) -> bool {
+        if self.basis.len() < 2 {
+            return false;
+        }
+        self.basis.pop();
+        for w in &mut self.weights {
+            w.pop();
+        }
+        true
+    }
+
+    /// A field's weights on the deviations: its difference from the mean projected on each
+    /// deviation (as stored).
+    pub fn project(&self, field: &[f64]) -> Vec<f32> {
+        let Some((mean, deviations)) = self.basis.split_first() else {
+            return Vec::new();
+        };
+        let difference: Vec<f64> = field
+            .iter()
+            .zip(mean)
+            .map(|(&v, &m)| v - f64::from(m))
+            .collect();
+        deviations
+            .iter()
+            .map(|b| {
+                let (along, length) =
+                    b.iter()
+                        .zip(&difference)
+                        .fold((0.0, 0.0), |(along, length), (&b, &d)| {
+                            let b = f64::from(b);
+                            (along + d * b, length + b * b)
+                        });
+                (along / f64::max(length, f64::MIN_POSITIVE)) as f32
+            })
+            .collect()
+    }
+
     /// Subspace `k`'s field: the mean plus its weighted deviations.
     pub fn combined(&self, k: usize) -> Option<Vec<f64>> {
         let mut field = vec![0.0; self.basis.first()?.len()];
@@ -343,6 +381,19 @@ pub struct Exemplar {
     /// Where the synthesis takes the L* variation coarser than a patch from (format version
     /// 11; older files: the MRF).
     pub coarse: CoarseSource,
+    /// Every measured light's own weights on the L* deviations, where stored.
+    pub light_weights: Option<LightWeights>,
+}
+
+/// The exemplar crop of every measured light in one view, as weights on the exemplar's L*
+/// deviations: a light's de-shaded detail (its cast shadows, highlights and what the
+/// relief's shading leaves) differs from its cluster representative's.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LightWeights {
+    /// The view the crops were cut in (the range map's registered view).
+    pub view: usize,
+    /// One row per light, in the order of the model's lights: a weight per L* deviation.
+    pub weights: Vec<Vec<f32>>,
 }
 
 /// Where a synthesis with an exemplar takes the L* variation coarser than the exemplar's
@@ -452,6 +503,20 @@ impl Exemplar {
     /// Subspace `k`'s crop as a (rows, cols) plane.
     pub fn crop(&self, k: usize) -> Option<Array2<f64>> {
         Array2::from_shape_vec((self.rows, self.cols), self.lightness.combined(k)?).ok()
+    }
+
+    /// Drops the last L* deviation (with every subspace's and light's weight on it) or, with
+    /// none left, the last chroma deviation; `false` where neither has one.
+    pub fn drop_deviation(&mut self) -> bool {
+        if self.lightness.drop_deviation() {
+            for w in self.light_weights.iter_mut().flat_map(|l| &mut l.weights) {
+                w.pop();
+            }
+            return true;
+        }
+        self.chroma
+            .as_mut()
+            .is_some_and(|c| c.fields.drop_deviation())
     }
 }
 
@@ -701,6 +766,20 @@ impl MaterialModel {
                 t.view,
                 t.tables.len(),
                 parts.range_map.is_some()
+            ));
+        }
+        if let Some(e) = &parts.exemplar
+            && let Some(l) = &e.light_weights
+            && (l.view >= nv
+                || l.weights.len() != nl
+                || !l.weights.iter().all(|w| {
+                    w.len() + 1 == e.lightness.basis.len() && w.iter().all(|v| v.is_finite())
+                }))
+        {
+            return bad(format!(
+                "exemplar light weights for view {} of {nv}, {} rows for {nl} lights (one finite weight per L* deviation)",
+                l.view,
+                l.weights.len()
             ));
         }
         if let Some(r) = &parts.range_map {
@@ -1118,6 +1197,7 @@ mod tests {
                 deviation_codes: DeviationCodes::Byte,
                 chroma: None,
                 coarse: CoarseSource::Mrf,
+                light_weights: None,
             })
         });
         assert!(e.contains("1 weight rows for 2 subspaces"), "{e}");
@@ -1133,6 +1213,7 @@ mod tests {
             deviation_codes: DeviationCodes::Byte,
             chroma: None,
             coarse: CoarseSource::Laid,
+            light_weights: None,
         };
         let model = MaterialModel::new(MaterialParts {
             exemplar: Some(exemplar.clone()),
@@ -1152,6 +1233,32 @@ mod tests {
             p.exemplar = Some(broken);
         });
         assert!(e.contains("exemplar of 2 x 2 samples"), "{e}");
+        // Light weights: a row a light, for a view the model has, a weight a deviation.
+        let with_lights = |view: usize, rows: usize, per_row: usize| {
+            let mut e = exemplar.clone();
+            e.light_weights = Some(LightWeights {
+                view,
+                weights: vec![vec![0.5; per_row]; rows],
+            });
+            e
+        };
+        let lit = MaterialParts {
+            exemplar: Some(with_lights(1, 3, 1)),
+            ..parts()
+        };
+        assert!(MaterialModel::new(lit).is_ok());
+        for (view, rows, per_row) in [(2, 3, 1), (0, 2, 1), (0, 3, 2)] {
+            let e = refused(|p| p.exemplar = Some(with_lights(view, rows, per_row)));
+            assert!(e.contains("exemplar light weights"), "{e}");
+        }
+        // Dropping a deviation drops every weight on it, the lights' too.
+        let mut dropped = with_lights(0, 3, 1);
+        assert!(dropped.drop_deviation());
+        assert_eq!(dropped.lightness.basis.len(), 1);
+        assert!(dropped.lightness.weights.iter().all(Vec::is_empty));
+        let rows = dropped.light_weights.as_ref().map(|l| &l.weights);
+        assert!(rows.is_some_and(|w| w.iter().all(Vec::is_empty)));
+        assert!(!dropped.drop_deviation(), "only the mean is left");
         // Chroma must cover the crop at its block side: 2 x 2 crop at step 2 is one sample.
         let with_chroma = |rows: usize, step: usize| {
             let mut e = exemplar.clone();

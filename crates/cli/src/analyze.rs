@@ -151,6 +151,16 @@ pub struct Args {
     /// and `view` do not apply them yet.
     #[arg(long)]
     no_light_tables: bool,
+    /// Do not store every light's own weights on the exemplar's L* deviations (only beside a
+    /// range map and an exemplar, off a lattice; a byte a light and deviation, about 0.5 KB for
+    /// 81 lights). With them, the image under a light of the view the range map is registered
+    /// with gets that light's own exemplar detail (its cast shadows, highlights and what the
+    /// relief's shading leaves) instead of its cluster representative's, and those crops count
+    /// in the deviations (together as much as the subspace images' crops; more deviations may
+    /// be kept). Costs analysis one read and de-shading of every light's image in that view,
+    /// and synthesis a second colour transfer for each image of that view.
+    #[arg(long)]
+    no_light_weights: bool,
     /// Largest side of the structure exemplar (pixels; 0: none): the L* of a centred crop of
     /// every subspace image, stored as their mean (a byte a pixel) and up to six principal
     /// deviations (4 bits a pixel), quilted at synthesis with one layout to carry each subspace image's
@@ -276,6 +286,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         colour_matching: !args.no_colour_matching,
         lit_matching: !args.no_lit_matching,
         light_tables: !args.no_light_tables,
+        light_weights: !args.no_light_weights,
         max_bytes: (args.max_bytes > 0).then_some(args.max_bytes),
         exemplar_side: args.exemplar,
         periodic: !args.no_lattice,

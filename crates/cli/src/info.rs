@@ -156,11 +156,18 @@ fn model_parts(m: &MaterialModel) -> Vec<ModelPart> {
             1 => String::new(),
             step => format!(", one sample every {step} pixels"),
         };
+        let lights = e.light_weights.as_ref().map_or(String::new(), |l| {
+            format!(
+                "; each of {} lights in view {} weighs them",
+                l.weights.len(),
+                l.view
+            )
+        });
         add(
             "exemplar",
             format::exemplar_bytes(m),
             format!(
-                "{} x {} L* crops (mean and {} deviations){sampling}{chroma}; coarse L* from {coarse}",
+                "{} x {} L* crops (mean and {} deviations){sampling}{chroma}; coarse L* from {coarse}{lights}",
                 e.cols,
                 e.rows,
                 e.lightness.basis.len().saturating_sub(1)
