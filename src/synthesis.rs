@@ -459,8 +459,11 @@ impl MaterialModel {
         Ok(image)
     }
 
-    /// Gives `image` subspace `k`'s lit lightness table ([`LitMarginals`]) relit by `heights`
-    /// for its representative's light; nothing without a table or a range map.
+    /// Scales each pixel of `image` so that, relit by `heights` for subspace `k`'s
+    /// representative's light, its L* marginal is that light's measured one (the subspace's
+    /// [`LitMarginals`](crate::model::LitMarginals)); nothing without a table or a range map.
+    /// The chromaticity is kept: matching a* and b* on their own made colours the material
+    /// does not have, and pushed the leather's frontal representatives off-chroma.
     fn match_lit(&self, k: usize, image: &mut Array3<f32>, heights: &Array2<f64>, edges: Edges) {
         let Some(s) = self.subspaces().get(k) else {
             return;
@@ -695,10 +698,10 @@ impl MaterialModel {
         };
         let mut delta = vec![0.0; e.lightness.basis.len()];
         for (v, l, w) in self.neighbouring_pairs(view, light)? {
-            let k = self.cluster_of(v, l)?;
             if v != lights.view {
                 continue;
             }
+            let k = self.cluster_of(v, l)?;
             if let (Some(own), Some(cluster)) = (lights.weights.get(l), e.lightness.weights.get(k))
             {
                 for (d, (a, b)) in delta[1..].iter_mut().zip(own.iter().zip(cluster)) {
