@@ -252,32 +252,6 @@ impl Principal {
         true
     }
 
-    /// A field's weights on the deviations: its difference from the mean projected on each
-    /// deviation (as stored).
-    pub fn project(&self, field: &[f64]) -> Vec<f32> {
-        let Some((mean, deviations)) = self.basis.split_first() else {
-            return Vec::new();
-        };
-        let difference: Vec<f64> = field
-            .iter()
-            .zip(mean)
-            .map(|(&v, &m)| v - f64::from(m))
-            .collect();
-        deviations
-            .iter()
-            .map(|b| {
-                let (along, length) =
-                    b.iter()
-                        .zip(&difference)
-                        .fold((0.0, 0.0), |(along, length), (&b, &d)| {
-                            let b = f64::from(b);
-                            (along + d * b, length + b * b)
-                        });
-                (along / f64::max(length, f64::MIN_POSITIVE)) as f32
-            })
-            .collect()
-    }
-
     /// Subspace `k`'s field: the mean plus its weighted deviations.
     pub fn combined(&self, k: usize) -> Option<Vec<f64>> {
         let mut field = vec![0.0; self.basis.first()?.len()];
