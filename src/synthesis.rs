@@ -26,6 +26,7 @@ use crate::geometry::{
 };
 use crate::model::{
     CoarseSource, Exemplar, LightLightness, MaterialModel, ModelError, PeriodicPart, Result,
+    SubspaceModel,
 };
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
@@ -345,6 +346,44 @@ impl MaterialModel {
             .ok_or_else(|| ModelError::parameter("subspace", format!("{k}")))
     }
 
+    /// Subspace `s`'s KL factors (or colour bands) at the pyramid `shapes` with band noise from
+    /// `noise`: every band synthesized in parallel (and matched to its measured marginal when
+    /// the model has band tables), the pyramid collapsed; each with the map of its values onto
+    /// its measured marginal (not yet applied).
+    fn factor_planes(
+        &self,
+        s: &SubspaceModel,
+        shapes: &[(usize, usize)],
+        o: &SynthesisOptions,
+        noise: &NoiseBank,
+    ) -> Vec<(Array2<f64>, MarginalMap)> {
+        let bands = s.levels.visit(SynthesizeBands {
+            shapes,
+            options: o,
+            noise,
+        });
+        let (band_probabilities, factor_probabilities) = (
+            marginals::band_probabilities(),
+            s.marginal_grid.probabilities(marginals::QUANTILES),
+        );
+        bands
+            .into_par_iter()
+            .zip(&s.marginals)
+            .enumerate()
+            .map(|(factor, (mut bands, target))| {
+                if let Some(tables) = &s.band_marginals {
+                    for (band, levels) in bands.iter_mut().zip(&tables.tables) {
+                        let table = &levels[factor];
+                        marginals::match_marginal(band, table, &band_probabilities);
+                    }
+                }
+                let plane = Pyramid { bands }.collapse_with(o.border());
+                let map = MarginalMap::new(&plane, target, &factor_probabilities);
+                (plane, map)
+            })
+            .collect()
+    }
+
     /// Subspace image `k` with band noise from `noise`: every band synthesized in parallel
     /// (and matched to its measured marginal when the model has band tables), then per KL
     /// factor (or colour band) the pyramid collapsed and the marginal matched, then the joint
@@ -361,41 +400,15 @@ impl MaterialModel {
         })?;
         let shapes = Pyramid::shapes(o.rows, o.cols, s.levels.len());
         let border = o.border();
-        // The exemplar's quilt does not depend on the bands: laid while they are drawn.
-        let (bands, laid) = rayon::join(
-            || {
-                s.levels.visit(SynthesizeBands {
-                    shapes: &shapes,
-                    options: o,
-                    noise,
-                })
-            },
+        // The exemplar's quilt does not depend on the factors: laid while they are drawn.
+        let (factors, laid) = rayon::join(
+            || self.factor_planes(s, &shapes, o, noise),
             || {
                 (s.kl.space == ColourSpace::Lab)
                     .then(|| structure.get_or_init(|| self.exemplar_details(o)).as_ref())
                     .flatten()
             },
         );
-        let (band_probabilities, factor_probabilities) = (
-            marginals::band_probabilities(),
-            s.marginal_grid.probabilities(marginals::QUANTILES),
-        );
-        let factors: Vec<(Array2<f64>, MarginalMap)> = bands
-            .into_par_iter()
-            .zip(&s.marginals)
-            .enumerate()
-            .map(|(factor, (mut bands, target))| {
-                if let Some(tables) = &s.band_marginals {
-                    for (band, levels) in bands.iter_mut().zip(&tables.tables) {
-                        let table = &levels[factor];
-                        marginals::match_marginal(band, table, &band_probabilities);
-                    }
-                }
-                let plane = Pyramid { bands }.collapse_with(border);
-                let map = MarginalMap::new(&plane, target, &factor_probabilities);
-                (plane, map)
-            })
-            .collect();
         let (factors, maps): (Vec<_>, Vec<_>) = factors.into_iter().unzip();
         let factors: [Array2<f64>; 3] = factors.try_into().expect("three factors");
         let mut colours = s.kl.coordinates_mapped(&factors, |f| {
@@ -427,17 +440,22 @@ impl MaterialModel {
                     CoarseSource::Laid => laid + offset.mean().unwrap_or(0.0),
                 }
             };
-            if let Some(coefficients) = e.lightness.coefficients(k) {
-                let laid = laid.lightness(&coefficients);
-                colours[0] = with_detail(&colours[0], laid, e.coarse);
-            }
-            if let Some(coefficients) = e.chroma.as_ref().and_then(|c| c.fields.coefficients(k)) {
-                for channel in 0..2 {
-                    let detail = laid.chroma(&coefficients, channel);
-                    let plane = &colours[1 + channel];
-                    colours[1 + channel] = with_detail(plane, detail, CoarseSource::Mrf);
-                }
-            }
+            let lightness = e.lightness.coefficients(k);
+            let chroma = e.chroma.as_ref().and_then(|c| c.fields.coefficients(k));
+            // The three channels in parallel.
+            colours
+                .par_iter_mut()
+                .enumerate()
+                .for_each(|(channel, plane)| match (channel, &lightness, &chroma) {
+                    (0, Some(coefficients), _) => {
+                        *plane = with_detail(plane, laid.lightness(coefficients), e.coarse);
+                    }
+                    (1 | 2, _, Some(coefficients)) => {
+                        let detail = laid.chroma(coefficients, channel - 1);
+                        *plane = with_detail(plane, detail, CoarseSource::Mrf);
+                    }
+                    _ => {}
+                });
         }
         if let Some(c) = &s.colour_marginals {
             c.transfer(&mut colours, border);

@@ -602,11 +602,9 @@ fn choose(
     // A thin band on rows the stride skips (tiny patches) is scored on all of it.
     let rough_known = if coarse.at.is_empty() { known } else { &coarse };
     let rough = guide.misfits(&candidates, rough_known, fits_inside);
-    let mut order: Vec<usize> = (0..candidates.len()).collect();
-    order.sort_by(|&a, &b| rough[a].0.total_cmp(&rough[b].0));
-    let shortlist: Vec<(usize, usize)> = order
+    let misfits: Vec<f64> = rough.iter().map(|m| m.0).collect();
+    let shortlist: Vec<(usize, usize)> = least(&misfits, SHORTLIST)
         .into_iter()
-        .take(SHORTLIST)
         .map(|k| candidates[k])
         .collect();
     let scored = guide.misfits(&shortlist, known, fits_inside);
@@ -621,6 +619,20 @@ fn choose(
         return (y, x, scored[pick].1);
     }
     refine(guide, (y, x), [ys, xs], known, fits_inside)
+}
+
+/// The indices of the `n` least `values`, in order, equals by index: a stable sort's first
+/// `n`, found by selection and a sort of those only (the candidates of a large source number
+/// thousands, the shortlist tens).
+fn least(values: &[f64], n: usize) -> Vec<usize> {
+    let by_value = |&a: &usize, &b: &usize| values[a].total_cmp(&values[b]).then(a.cmp(&b));
+    let mut order: Vec<usize> = (0..values.len()).collect();
+    if order.len() > n {
+        order.select_nth_unstable_by(n, by_value);
+        order.truncate(n);
+    }
+    order.sort_unstable_by(by_value);
+    order
 }
 
 /// The offset within the axes' `refine` of `(y, x)` whose misfit on the `known` samples is
@@ -962,6 +974,21 @@ pub fn resample_periodic(tile: &Array2<f64>, rows: usize, cols: usize) -> Array2
 mod tests {
     use super::*;
     use crate::geometry::integrate::integrate_on_torus;
+
+    #[test]
+    fn the_least_are_a_stable_sorts_first() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        // Few distinct values: many ties, which a stable sort keeps in index order.
+        let values: Vec<f64> = (0..500)
+            .map(|_| f64::from(rng.random_range(0..40u8)))
+            .collect();
+        for n in [0, 1, 7, 64, 499, 500, 600] {
+            let mut sorted: Vec<usize> = (0..values.len()).collect();
+            sorted.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
+            sorted.truncate(n);
+            assert_eq!(least(&values, n), sorted, "n = {n}");
+        }
+    }
 
     /// A relief with structure: randomly placed elongated ridges on a broad bow.
     fn ridges(rows: usize, cols: usize, seed: u64) -> Array2<f64> {
