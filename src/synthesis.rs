@@ -21,7 +21,7 @@ use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::parallax;
 use crate::geometry::relight::{SHADING_FLOOR, Shading, shading_factor};
 use crate::geometry::{
-    Phase, Placement, QuiltedRelief, detail_scale, patch_side, quilt, quilt_laid,
+    Phase, Placement, QuiltedRelief, detail_scale, patch_side, quilt, quilt_laid, quilt_placement,
     resample_periodic, split_detail,
 };
 use crate::model::{
@@ -860,7 +860,11 @@ impl MaterialModel {
         } else {
             e.crop(0)?
         };
-        Some(laid_exemplar(&guide, e, o, (seed, phase.as_ref(), true)).1)
+        // Only the laid crops are used: the guide's own quilt is not kept.
+        let placement_only = |g: &_, p: &_, m: &_, size, seed, phase: Option<&Phase>| {
+            ((), quilt_placement(g, p, m, size, seed, phase))
+        };
+        Some(laid_exemplar(&guide, e, o, (seed, phase.as_ref(), true), placement_only).1)
     }
 
     /// The range map's heights ([`MaterialModel::range_heights`], the same values) and the
@@ -876,7 +880,13 @@ impl MaterialModel {
             return None;
         }
         let seed = crate::mrf::noise::mix(o.seed, RANGE_SEED);
-        Some(laid_exemplar(&map.samples(), e, o, (seed, None, false)))
+        Some(laid_exemplar(
+            &map.samples(),
+            e,
+            o,
+            (seed, None, false),
+            quilt_laid,
+        ))
     }
 
     /// How the relief shades `light`: the measured lights' fitted strengths
@@ -1024,15 +1034,23 @@ const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
 /// keeps the lattice's phase. The mean crop's colour (its a* and b*, and its L* when the guide
 /// is not itself a lightness) helps the guide choose the patches and cuts, so fewer cuts join two
 /// colours on one flat surface.
-fn laid_exemplar(
+fn laid_exemplar<R>(
     guide: &Array2<f64>,
     e: &Exemplar,
     o: &SynthesisOptions,
     (seed, phase, guide_is_lightness): (u64, Option<&Phase>, bool),
-) -> (QuiltedRelief, LaidExemplar) {
+    quilt: impl FnOnce(
+        &Array2<f64>,
+        &[Array2<f64>],
+        &[usize],
+        (usize, usize),
+        u64,
+        Option<&Phase>,
+    ) -> (R, Placement),
+) -> (R, LaidExemplar) {
     let (scale, torus) = Scale::new(o, e.step, patch_side(e.rows, e.cols));
     let (planes, matched) = exemplar_planes(e, guide_is_lightness);
-    let (relief, placement) = quilt_laid(guide, &planes, &matched, torus, seed, phase);
+    let (relief, placement) = quilt(guide, &planes, &matched, torus, seed, phase);
     let placement = match scale {
         Scale::Texels => placement.cropped(o.rows, o.cols),
         Scale::Stepped { .. } => placement,

@@ -86,7 +86,8 @@ impl Layout {
 /// # Panics
 /// An empty source or a zero output size (callers check both).
 pub fn quilt(source: &Array2<f64>, rows: usize, cols: usize, seed: u64) -> Array2<f64> {
-    quilt_patches(source, &[], &[], rows, cols, seed, None)
+    let differences = NeighbourDifferences::zeros(rows, cols);
+    quilt_patches(source, &[], &[], rows, cols, seed, None, differences)
         .0
         .integrate()
 }
@@ -158,9 +159,89 @@ pub fn quilt_laid(
         companions.iter().all(|c| c.dim() == source.dim()),
         "registered companions"
     );
-    let (relief, _, placement) =
-        quilt_patches(source, companions, matched, rows, cols, seed, phase);
+    let differences = NeighbourDifferences::zeros(rows, cols);
+    let (relief, _, placement) = quilt_patches(
+        source,
+        companions,
+        matched,
+        rows,
+        cols,
+        seed,
+        phase,
+        differences,
+    );
     (relief, placement)
+}
+
+/// The [`Placement`] of the quilt [`quilt_laid`] makes with the same arguments, without the
+/// source's own quilt: for a caller that only lays fields (it keeps neither the two
+/// differences per output sample nor their memory, 16 MB at 1024^2).
+pub fn quilt_placement(
+    source: &Array2<f64>,
+    companions: &[Array2<f64>],
+    matched: &[usize],
+    (rows, cols): (usize, usize),
+    seed: u64,
+    phase: Option<&Phase>,
+) -> Placement {
+    assert!(
+        companions.iter().all(|c| c.dim() == source.dim()),
+        "registered companions"
+    );
+    quilt_patches(source, companions, matched, rows, cols, seed, phase, ()).2
+}
+
+/// What a quilt keeps of the differences between neighbouring samples that its patches bring:
+/// the fields a relief is integrated from ([`NeighbourDifferences`]), or nothing (`()`).
+trait Differences {
+    /// What the quilt hands back of them.
+    type Output;
+    /// The difference from output sample `at` to its right neighbour.
+    fn right(&mut self, at: (usize, usize), difference: f64);
+    /// The difference from output sample `at` to the neighbour below.
+    fn down(&mut self, at: (usize, usize), difference: f64);
+    /// What is handed back, the quilt's high-pass scale `sigma` and its `mean` height given.
+    fn finish(self, sigma: f64, mean: f64) -> Self::Output;
+}
+
+/// Differences to the right and downward neighbour on the torus, per output sample.
+struct NeighbourDifferences {
+    right: Array2<f64>,
+    down: Array2<f64>,
+}
+
+impl NeighbourDifferences {
+    fn zeros(rows: usize, cols: usize) -> Self {
+        Self {
+            right: Array2::zeros((rows, cols)),
+            down: Array2::zeros((rows, cols)),
+        }
+    }
+}
+
+impl Differences for NeighbourDifferences {
+    type Output = QuiltedRelief;
+    fn right(&mut self, at: (usize, usize), difference: f64) {
+        self.right[at] = difference;
+    }
+    fn down(&mut self, at: (usize, usize), difference: f64) {
+        self.down[at] = difference;
+    }
+    fn finish(self, sigma: f64, mean: f64) -> QuiltedRelief {
+        QuiltedRelief {
+            right: self.right,
+            down: self.down,
+            sigma,
+            mean,
+        }
+    }
+}
+
+impl Differences for () {
+    type Output = ();
+    fn right(&mut self, _: (usize, usize), _: f64) {}
+    fn down(&mut self, _: (usize, usize), _: f64) {}
+    fn finish(self, _: f64, _: f64) {}
 }
 
 /// A quilt's heights before integration: the differences between neighbours on the torus
@@ -241,8 +322,9 @@ impl Placement {
 }
 
 /// [`quilt`], with the index of the patch every sample came from and the [`Placement`] of
-/// every sample (see [`quilt_laid`]).
-fn quilt_patches(
+/// every sample (see [`quilt_laid`]); the neighbour differences go to `differences`.
+#[allow(clippy::too_many_arguments)]
+fn quilt_patches<D: Differences>(
     source: &Array2<f64>,
     companions: &[Array2<f64>],
     matched: &[usize],
@@ -250,7 +332,8 @@ fn quilt_patches(
     cols: usize,
     seed: u64,
     phase: Option<&Phase>,
-) -> (QuiltedRelief, Array2<u32>, Placement) {
+    mut differences: D,
+) -> (D::Output, Array2<u32>, Placement) {
     let (sr, sc) = source.dim();
     assert!(sr > 0 && sc > 0 && rows > 0 && cols > 0, "empty quilt");
     assert!(
@@ -276,9 +359,6 @@ fn quilt_patches(
     let mut out_colour = vec![Array2::<f64>::zeros((rows, cols)); guide.colour.len()];
     // Per patch: its first torus sample (row, column) and its source offset (row, column).
     let mut placements: Vec<[usize; 4]> = Vec::new();
-    // Differences to the right and downward neighbour on the torus, from the patches.
-    let mut right = Array2::<f64>::zeros((rows, cols));
-    let mut down = Array2::<f64>::zeros((rows, cols));
     for i in 0..lr.patches() {
         for j in 0..lc.patches() {
             let (r0, hr) = lr.span(i, rows);
@@ -339,10 +419,10 @@ fn quilt_patches(
                     // Every neighbour pair with a taken end gets this patch's difference: the
                     // pairs across its cut too, both ends lie in its overlap band.
                     if x + 1 < hc && (taken[(y, x)] || taken[(y, x + 1)]) {
-                        right[p] = src(y, x + 1) - here;
+                        differences.right(p, src(y, x + 1) - here);
                     }
                     if y + 1 < hr && (taken[(y, x)] || taken[(y + 1, x)]) {
-                        down[p] = src(y + 1, x) - here;
+                        differences.down(p, src(y + 1, x) - here);
                     }
                 }
             }
@@ -355,12 +435,7 @@ fn quilt_patches(
         let (y, x) = ((r + rows - r0) % rows, (col + cols - c0) % cols);
         ((y0 + y) % sr * sc + (x0 + x) % sc) as u32
     });
-    let relief = QuiltedRelief {
-        right,
-        down,
-        sigma,
-        mean: source.mean().unwrap_or(0.0),
-    };
+    let relief = differences.finish(sigma, source.mean().unwrap_or(0.0));
     let placement = Placement {
         from,
         source: (sr, sc),
@@ -1180,7 +1255,16 @@ mod tests {
     #[test]
     fn cuts_are_as_smooth_as_the_interior() {
         let source = ridges(100, 100, 1);
-        let (relief, patch, _) = quilt_patches(&source, &[], &[], 240, 200, 7, None);
+        let (relief, patch, _) = quilt_patches(
+            &source,
+            &[],
+            &[],
+            240,
+            200,
+            7,
+            None,
+            NeighbourDifferences::zeros(240, 200),
+        );
         let heights = relief.integrate();
         let (same, cut) = neighbour_steps(&Quilt { heights, patch });
         println!("neighbour step: within patches {same:.4}, across cuts {cut:.4}");
@@ -1299,7 +1383,16 @@ mod tests {
             let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
             let source = ridges(43, 64, 10 + seed)
                 + Array2::from_shape_fn((43, 64), |_| rng.random_range(-0.5..0.5));
-            let (q, patch, _) = quilt_patches(&source, &[], &[], 256, 256, seed, None);
+            let (q, patch, _) = quilt_patches(
+                &source,
+                &[],
+                &[],
+                256,
+                256,
+                seed,
+                None,
+                NeighbourDifferences::zeros(256, 256),
+            );
             let q = q.integrate();
             let (same, _) = neighbour_steps(&Quilt {
                 heights: q.clone(),
@@ -1390,7 +1483,7 @@ mod tests {
         let steps = |matched: &[usize]| {
             let companions = std::slice::from_ref(&colour);
             let (_, patch, placement) =
-                quilt_patches(&source, companions, matched, 150, 130, 4, None);
+                quilt_patches(&source, companions, matched, 150, 130, 4, None, ());
             neighbour_steps(&Quilt {
                 heights: placement.lay(&colour),
                 patch,
