@@ -1029,9 +1029,9 @@ fn cropped(field: Array2<f64>, rows: usize, cols: usize) -> Array2<f64> {
 /// Mixed into the synthesis seed for the range map's quilt (the bands use their own indices).
 const RANGE_SEED: u64 = 0x7261_6e67_655f_6d61;
 /// `guide` quilted for the output of `o` (on [`quilt_torus`]) with the exemplar's basis crops
-/// laid by the same patches ([`quilt_laid`]): the guide's quilt on the torus, not yet
-/// integrated, and the crops with their placement on the output; with a phase, every patch
-/// keeps the lattice's phase. The mean crop's colour (its a* and b*, and its L* when the guide
+/// laid by the same patches: what `quilt` keeps of the guide's own quilt ([`quilt_laid`]: its
+/// differences, not yet integrated; [`quilt_placement`]: nothing), and the crops with their
+/// placement on the output; with a phase, every patch keeps the lattice's phase. The mean crop's colour (its a* and b*, and its L* when the guide
 /// is not itself a lightness) helps the guide choose the patches and cuts, so fewer cuts join two
 /// colours on one flat surface.
 fn laid_exemplar<R>(
