@@ -155,10 +155,6 @@ pub fn quilt_laid(
     seed: u64,
     phase: Option<&Phase>,
 ) -> (QuiltedRelief, Placement) {
-    assert!(
-        companions.iter().all(|c| c.dim() == source.dim()),
-        "registered companions"
-    );
     let differences = NeighbourDifferences::zeros(rows, cols);
     let (relief, _, placement) = quilt_patches(
         source,
@@ -184,10 +180,6 @@ pub fn quilt_placement(
     seed: u64,
     phase: Option<&Phase>,
 ) -> Placement {
-    assert!(
-        companions.iter().all(|c| c.dim() == source.dim()),
-        "registered companions"
-    );
     quilt_patches(source, companions, matched, rows, cols, seed, phase, ()).2
 }
 
@@ -336,6 +328,10 @@ fn quilt_patches<D: Differences>(
 ) -> (D::Output, Array2<u32>, Placement) {
     let (sr, sc) = source.dim();
     assert!(sr > 0 && sc > 0 && rows > 0 && cols > 0, "empty quilt");
+    assert!(
+        companions.iter().all(|c| c.dim() == source.dim()),
+        "registered companions"
+    );
     assert!(
         u32::try_from(sr * sc).is_ok(),
         "a source under 2^32 samples"
