@@ -179,9 +179,17 @@ const MAX_CHROMA_GAIN: f64 = 4.0;
 /// 1.0-1.2x the measured at 4 and 12 px.
 pub type ChromaSpread = Vec<[f64; 2]>;
 
-/// The standard deviation of `plane`'s values.
+/// The standard deviation of `plane`'s values, in two passes (the mean, then the squared
+/// deviations) that the compiler vectorises: ndarray's one-pass `std` updates a running mean
+/// per value and took about 5 % of a 1024^2 synthesis's processor time.
 fn spread(plane: &Array2<f64>) -> f64 {
-    plane.std(0.0)
+    let n = plane.len();
+    if n == 0 {
+        return 0.0;
+    }
+    let mean = plane.sum() / n as f64;
+    let squares = plane.fold(0.0, |acc, &v| acc + (v - mean) * (v - mean));
+    (squares / n as f64).sqrt()
 }
 
 /// The most pyramid levels `(rows, cols)` halves exactly for (a tileable plane's bands wrap

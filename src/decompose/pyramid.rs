@@ -7,7 +7,8 @@
 //! `G_k - EXPAND(G_{k+1})` and the last band is the coarsest Gaussian level, so collapsing is
 //! exact by construction. Borders are mirrored (without repeating the edge sample).
 
-use ndarray::Array2;
+use ndarray::{Array2, Axis};
+use rayon::prelude::*;
 
 /// The generating kernel, a = 0.4.
 const KERNEL: [f64; 5] = [0.05, 0.25, 0.4, 0.25, 0.05];
@@ -78,7 +79,8 @@ fn expand_taps(n_in: usize, target: usize, border: Border) -> Taps {
 }
 
 /// Applies taps along rows (each output row a weighted sum of whole input rows, so the inner
-/// loop runs over contiguous memory) and then along columns.
+/// loop runs over contiguous memory) and then along columns; output rows in parallel (each
+/// computed alone, so the values do not depend on the threads).
 pub(crate) fn apply_separable(
     input: &Array2<f64>,
     row_taps: &Taps,
@@ -86,11 +88,15 @@ pub(crate) fn apply_separable(
 ) -> Array2<f64> {
     let cols_in = input.ncols();
     let mut tmp = Array2::<f64>::zeros((row_taps.len(), cols_in));
-    for (mut out_row, taps) in tmp.rows_mut().into_iter().zip(row_taps) {
-        for &(j, w) in taps {
-            out_row.scaled_add(w, &input.row(j));
-        }
-    }
+    tmp.axis_iter_mut(Axis(0))
+        .into_par_iter()
+        .zip(row_taps)
+        .with_min_len(MIN_PARALLEL_ROWS)
+        .for_each(|(mut out_row, taps)| {
+            for &(j, w) in taps {
+                out_row.scaled_add(w, &input.row(j));
+            }
+        });
     // The column taps flattened once (start offsets, then index/weight pairs), so the
     // per-pixel loop reads contiguous memory instead of one small vector per output column.
     let mut starts = Vec::with_capacity(col_taps.len() + 1);
@@ -101,20 +107,28 @@ pub(crate) fn apply_separable(
     }
     starts.push(flat.len());
     let mut out = Array2::<f64>::zeros((row_taps.len(), col_taps.len()));
-    for (src, mut dst) in tmp.rows().into_iter().zip(out.rows_mut()) {
-        let src = src.as_slice().expect("standard layout");
-        let dst = dst.as_slice_mut().expect("standard layout");
-        for (d, span) in dst.iter_mut().zip(starts.windows(2)) {
-            // Unrolled for the common tap counts (2 and 3 when expanding, 2 when resampling).
-            *d = match flat[span[0]..span[1]] {
-                [(a, wa), (b, wb)] => wa * src[a] + wb * src[b],
-                [(a, wa), (b, wb), (c, wc)] => wa * src[a] + wb * src[b] + wc * src[c],
-                ref taps => taps.iter().map(|&(j, w)| w * src[j]).sum(),
-            };
-        }
-    }
+    out.axis_iter_mut(Axis(0))
+        .into_par_iter()
+        .zip(tmp.axis_iter(Axis(0)))
+        .with_min_len(MIN_PARALLEL_ROWS)
+        .for_each(|(mut dst, src)| {
+            let src = src.as_slice().expect("standard layout");
+            let dst = dst.as_slice_mut().expect("standard layout");
+            for (d, span) in dst.iter_mut().zip(starts.windows(2)) {
+                // Unrolled for the common tap counts (2 and 3 when expanding, 2 when resampling).
+                *d = match flat[span[0]..span[1]] {
+                    [(a, wa), (b, wb)] => wa * src[a] + wb * src[b],
+                    [(a, wa), (b, wb), (c, wc)] => wa * src[a] + wb * src[b] + wc * src[c],
+                    ref taps => taps.iter().map(|&(j, w)| w * src[j]).sum(),
+                };
+            }
+        });
     out
 }
+
+/// Fewest rows [`apply_separable`] hands a thread at once: a small level is not split into
+/// tasks that cost more to schedule than to run.
+const MIN_PARALLEL_ROWS: usize = 32;
 
 /// REDUCE: blur and keep every other row and column; shape `(ceil(h/2), ceil(w/2))`, mirrored
 /// borders.

@@ -9,7 +9,7 @@
 //! and the heights are integrated from the patches' differences (a Poisson solve on the
 //! torus), so what a cut cannot hide is spread smoothly instead of left as a step.
 
-use ndarray::Array2;
+use ndarray::{Array2, Zip};
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
@@ -289,7 +289,11 @@ impl Placement {
         // Row-major without a copy for the (usual) standard-layout field.
         let field = field.as_standard_layout();
         let values = field.as_slice().expect("standard layout is contiguous");
-        self.from.mapv(|i| values[i as usize])
+        let mut laid = Array2::zeros(self.from.dim());
+        Zip::from(&mut laid)
+            .and(&self.from)
+            .par_for_each(|v, &i| *v = values[i as usize]);
+        laid
     }
 
     /// The source's shape (rows, cols).
@@ -426,11 +430,14 @@ fn quilt_patches<D: Differences>(
     }
     // Fields laid with the quilt are copied from the patches each sample came from (their
     // raw values: the caller keeps what scale of them it wants).
-    let from = Array2::from_shape_fn((rows, cols), |(r, col)| {
-        let [r0, c0, y0, x0] = placements[label[(r, col)] as usize];
-        let (y, x) = ((r + rows - r0) % rows, (col + cols - c0) % cols);
-        ((y0 + y) % sr * sc + (x0 + x) % sc) as u32
-    });
+    let mut from = Array2::<u32>::zeros((rows, cols));
+    Zip::indexed(&mut from)
+        .and(&label)
+        .par_for_each(|(r, col), from, &id| {
+            let [r0, c0, y0, x0] = placements[id as usize];
+            let (y, x) = ((r + rows - r0) % rows, (col + cols - c0) % cols);
+            *from = ((y0 + y) % sr * sc + (x0 + x) % sc) as u32;
+        });
     let relief = differences.finish(sigma, source.mean().unwrap_or(0.0));
     let placement = Placement {
         from,
@@ -492,14 +499,15 @@ fn gaussian_blur(field: &Array2<f64>, sigma: f64, wrap: bool) -> Array2<f64> {
             q.clamp(0, n as isize - 1) as usize
         }
     };
-    let blocks = Array2::from_shape_fn((bh, bw), |(i, j)| {
+    let mut blocks = Array2::zeros((bh, bw));
+    Zip::indexed(&mut blocks).par_for_each(|(i, j), block| {
         let mut sum = 0.0;
         for y in i * f..(i + 1) * f {
             for x in j * f..(j + 1) * f {
                 sum += field[(source(y, h), source(x, w))];
             }
         }
-        sum / (f * f) as f64
+        *block = sum / (f * f) as f64;
     });
     let ff = f as f64;
     let narrowed = (sigma * sigma - (ff * ff - 1.0) / 12.0).max(0.0).sqrt() / ff;

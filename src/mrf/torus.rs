@@ -134,7 +134,9 @@ pub(crate) fn car2d(
         .for_each(|(column, t)| {
             for (bin, &zj) in column.iter_mut().zip(&z) {
                 let a = Complex64::new(1.0, 0.0) - polynomial(t, zj);
-                let gain = if a.norm() < SINGULAR {
+                // |A|^2 against SINGULAR^2: libm's hypot in |A| cost a few percent of a
+                // 1024^2 synthesis's processor time.
+                let gain = if a.norm_sqr() < SINGULAR * SINGULAR {
                     Complex64::new(0.0, 0.0)
                 } else {
                     sigma / a
