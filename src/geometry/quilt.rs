@@ -869,12 +869,20 @@ impl<'a> Guide<'a> {
         // The scan is compiled for the widest vector instructions the processor has, chosen
         // at run time (the same sums in the same order: no fused multiply-adds).
         let arch = pulp::Arch::new();
-        candidates
-            .par_iter()
-            .map(|&corner| arch.dispatch(Scan { corner, ..scan }))
-            .collect()
+        let one = |&corner: &(usize, usize)| arch.dispatch(Scan { corner, ..scan });
+        // A short scan (the shortlist, the refinement) on this thread: waking another for it
+        // cost more than it saved.
+        if candidates.len() * known.at.len() * CH < PARALLEL_SCAN {
+            candidates.iter().map(one).collect()
+        } else {
+            candidates.par_iter().map(one).collect()
+        }
     }
 }
+
+/// Fewest sample values (candidates x known samples x planes) a candidate scan is split
+/// between threads for.
+const PARALLEL_SCAN: usize = 1 << 19;
 
 /// The sums [`Guide::sums`] takes for one candidate `corner` (source row, column).
 #[derive(Clone, Copy)]
