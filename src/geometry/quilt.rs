@@ -188,6 +188,9 @@ pub fn quilt_placement(
 trait Differences {
     /// What the quilt hands back of them.
     type Output;
+    /// Whether [`Differences::right`] and [`Differences::down`] keep anything (the quilt
+    /// skips computing the differences otherwise).
+    const RECORDS: bool;
     /// The difference from output sample `at` to its right neighbour.
     fn right(&mut self, at: (usize, usize), difference: f64);
     /// The difference from output sample `at` to the neighbour below.
@@ -213,6 +216,7 @@ impl NeighbourDifferences {
 
 impl Differences for NeighbourDifferences {
     type Output = QuiltedRelief;
+    const RECORDS: bool = true;
     fn right(&mut self, at: (usize, usize), difference: f64) {
         self.right[at] = difference;
     }
@@ -231,6 +235,7 @@ impl Differences for NeighbourDifferences {
 
 impl Differences for () {
     type Output = ();
+    const RECORDS: bool = false;
     fn right(&mut self, _: (usize, usize), _: f64) {}
     fn down(&mut self, _: (usize, usize), _: f64) {}
     fn finish(self, _: f64, _: f64) {}
@@ -388,41 +393,40 @@ fn quilt_patches<D: Differences>(
             let (source_rows, source_cols) = (wrapped(y0, hr, sr), wrapped(x0, hc, sc));
             let from = |y: usize, x: usize| (source_rows[y], source_cols[x]);
             let src = |y: usize, x: usize| source[from(y, x)] + lift;
-            let error = Array2::from_shape_fn((hr, hc), |(y, x)| {
-                let p = at(y, x);
-                if filled[p] {
-                    guide.relief_weight * (src(y, x) - out[p]).powi(2)
-                        + guide
-                            .colour
-                            .iter()
-                            .zip(&out_colour)
-                            .map(|(c, o)| (c[from(y, x)] - o[p]).powi(2))
-                            .sum::<f64>()
-                } else {
-                    0.0
-                }
-            });
+            // The squared misfit at the known samples (0 elsewhere), from their values copied.
+            let mut error = Array2::<f64>::zeros((hr, hc));
+            for (k, &(y, x)) in known.at.iter().enumerate() {
+                let f = from(y, x);
+                error[(y, x)] = guide.relief_weight
+                    * (source[f] + lift - known.values[0][k]).powi(2)
+                    + (guide.colour.iter().zip(&known.values[1..]))
+                        .map(|(c, o)| (c[f] - o[k]).powi(2))
+                        .sum::<f64>();
+            }
             let taken = take_mask(&error, |y, x| filled[at(y, x)], lr.overlap, lc.overlap);
             let id = (i * lc.patches() + j) as u32;
             placements.push([r0, c0, y0, x0]);
-            for y in 0..hr {
-                for x in 0..hc {
-                    let (p, here) = (at(y, x), src(y, x));
-                    if taken[(y, x)] {
-                        out[p] = here;
-                        for (c, o) in guide.colour.iter().zip(&mut out_colour) {
-                            o[p] = c[from(y, x)];
+            for ((y, x), _) in taken.indexed_iter().filter(|(_, taken)| **taken) {
+                let (p, f) = (at(y, x), from(y, x));
+                out[p] = source[f] + lift;
+                for (c, o) in guide.colour.iter().zip(&mut out_colour) {
+                    o[p] = c[f];
+                }
+                filled[p] = true;
+                label[p] = id;
+            }
+            if D::RECORDS {
+                for y in 0..hr {
+                    for x in 0..hc {
+                        let (p, here) = (at(y, x), src(y, x));
+                        // Every neighbour pair with a taken end gets this patch's difference:
+                        // the pairs across its cut too, both ends lie in its overlap band.
+                        if x + 1 < hc && (taken[(y, x)] || taken[(y, x + 1)]) {
+                            differences.right(p, src(y, x + 1) - here);
                         }
-                        filled[p] = true;
-                        label[p] = id;
-                    }
-                    // Every neighbour pair with a taken end gets this patch's difference: the
-                    // pairs across its cut too, both ends lie in its overlap band.
-                    if x + 1 < hc && (taken[(y, x)] || taken[(y, x + 1)]) {
-                        differences.right(p, src(y, x + 1) - here);
-                    }
-                    if y + 1 < hr && (taken[(y, x)] || taken[(y + 1, x)]) {
-                        differences.down(p, src(y + 1, x) - here);
+                        if y + 1 < hr && (taken[(y, x)] || taken[(y + 1, x)]) {
+                            differences.down(p, src(y + 1, x) - here);
+                        }
                     }
                 }
             }
@@ -869,20 +873,12 @@ impl<'a> Guide<'a> {
         // The scan is compiled for the widest vector instructions the processor has, chosen
         // at run time (the same sums in the same order: no fused multiply-adds).
         let arch = pulp::Arch::new();
-        let one = |&corner: &(usize, usize)| arch.dispatch(Scan { corner, ..scan });
-        // A short scan (the shortlist, the refinement) on this thread: waking another for it
-        // cost more than it saved.
-        if candidates.len() * known.at.len() * CH < PARALLEL_SCAN {
-            candidates.iter().map(one).collect()
-        } else {
-            candidates.par_iter().map(one).collect()
-        }
+        candidates
+            .par_iter()
+            .map(|&corner| arch.dispatch(Scan { corner, ..scan }))
+            .collect()
     }
 }
-
-/// Fewest sample values (candidates x known samples x planes) a candidate scan is split
-/// between threads for.
-const PARALLEL_SCAN: usize = 1 << 19;
 
 /// The sums [`Guide::sums`] takes for one candidate `corner` (source row, column).
 #[derive(Clone, Copy)]
