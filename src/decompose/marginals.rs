@@ -168,7 +168,7 @@ pub struct MarginalMap {
     source: Vec<f64>,
     target: Vec<f64>,
     /// (lowest source value, grid steps per unit, map at the grid nodes) when tabulated.
-    table: Option<(f64, f64, Vec<f64>)>,
+    table: Option<(f64, f64, Box<[f64; LUT + 1]>)>,
 }
 
 impl MarginalMap {
@@ -191,7 +191,7 @@ impl MarginalMap {
         let (lo, hi) = (map.source[0], map.source[map.source.len() - 1]);
         if hi.partial_cmp(&lo) == Some(std::cmp::Ordering::Greater) && uses >= 4 * LUT {
             let step = (hi - lo) / LUT as f64;
-            let nodes = (0..=LUT).map(|i| map.exact(lo + step * i as f64)).collect();
+            let nodes = Box::new(std::array::from_fn(|i| map.exact(lo + step * i as f64)));
             map.table = Some((lo, 1.0 / step, nodes));
         }
         map
@@ -222,7 +222,7 @@ impl MarginalMap {
             values.iter_mut().for_each(|v| *v = self.exact(*v));
             return;
         };
-        let nodes: &[f64; LUT + 1] = nodes[..].try_into().expect("LUT + 1 nodes");
+        let nodes: &[f64; LUT + 1] = nodes;
         let mut index = [0u32; BLOCK];
         for block in values.chunks_mut(BLOCK) {
             for (v, i) in block.iter_mut().zip(&mut index) {
