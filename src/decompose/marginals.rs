@@ -262,9 +262,10 @@ const LUT: usize = 4096;
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     #[test]
     fn selected_quantiles_are_the_sorted_ones() {
-        use super::*;
         // Ties, a constant run and values of both signs; every sample size from 1 to 300.
         for n in 1..300 {
             let values: Vec<f64> = (0..n)
@@ -292,8 +293,6 @@ mod tests {
             }
         }
     }
-
-    use super::*;
 
     #[test]
     fn a_slice_is_mapped_as_value_by_value() {

@@ -188,13 +188,15 @@ pub fn quilt_placement(
 trait Differences {
     /// What the quilt hands back of them.
     type Output;
-    /// Whether [`Differences::right`] and [`Differences::down`] keep anything (the quilt
-    /// skips computing the differences otherwise).
-    const RECORDS: bool;
-    /// The difference from output sample `at` to its right neighbour.
-    fn right(&mut self, at: (usize, usize), difference: f64);
-    /// The difference from output sample `at` to the neighbour below.
-    fn down(&mut self, at: (usize, usize), difference: f64);
+    /// Takes the differences one patch brings: `taken` (the patch's shape) says which of its
+    /// samples it lays, `at` where a patch sample lies on the output, `value` the patch's value
+    /// there.
+    fn record(
+        &mut self,
+        taken: &Array2<bool>,
+        at: impl Fn(usize, usize) -> (usize, usize),
+        value: impl Fn(usize, usize) -> f64,
+    );
     /// What is handed back, the quilt's high-pass scale `sigma` and its `mean` height given.
     fn finish(self, sigma: f64, mean: f64) -> Self::Output;
 }
@@ -216,12 +218,26 @@ impl NeighbourDifferences {
 
 impl Differences for NeighbourDifferences {
     type Output = QuiltedRelief;
-    const RECORDS: bool = true;
-    fn right(&mut self, at: (usize, usize), difference: f64) {
-        self.right[at] = difference;
-    }
-    fn down(&mut self, at: (usize, usize), difference: f64) {
-        self.down[at] = difference;
+    fn record(
+        &mut self,
+        taken: &Array2<bool>,
+        at: impl Fn(usize, usize) -> (usize, usize),
+        value: impl Fn(usize, usize) -> f64,
+    ) {
+        let (hr, hc) = taken.dim();
+        for y in 0..hr {
+            for x in 0..hc {
+                let (p, here) = (at(y, x), value(y, x));
+                // Every neighbour pair with a taken end gets this patch's difference: the
+                // pairs across its cut too, both ends lie in its overlap band.
+                if x + 1 < hc && (taken[(y, x)] || taken[(y, x + 1)]) {
+                    self.right[p] = value(y, x + 1) - here;
+                }
+                if y + 1 < hr && (taken[(y, x)] || taken[(y + 1, x)]) {
+                    self.down[p] = value(y + 1, x) - here;
+                }
+            }
+        }
     }
     fn finish(self, sigma: f64, mean: f64) -> QuiltedRelief {
         QuiltedRelief {
@@ -235,9 +251,13 @@ impl Differences for NeighbourDifferences {
 
 impl Differences for () {
     type Output = ();
-    const RECORDS: bool = false;
-    fn right(&mut self, _: (usize, usize), _: f64) {}
-    fn down(&mut self, _: (usize, usize), _: f64) {}
+    fn record(
+        &mut self,
+        _: &Array2<bool>,
+        _: impl Fn(usize, usize) -> (usize, usize),
+        _: impl Fn(usize, usize) -> f64,
+    ) {
+    }
     fn finish(self, _: f64, _: f64) {}
 }
 
@@ -415,21 +435,7 @@ fn quilt_patches<D: Differences>(
                 filled[p] = true;
                 label[p] = id;
             }
-            if D::RECORDS {
-                for y in 0..hr {
-                    for x in 0..hc {
-                        let (p, here) = (at(y, x), src(y, x));
-                        // Every neighbour pair with a taken end gets this patch's difference:
-                        // the pairs across its cut too, both ends lie in its overlap band.
-                        if x + 1 < hc && (taken[(y, x)] || taken[(y, x + 1)]) {
-                            differences.right(p, src(y, x + 1) - here);
-                        }
-                        if y + 1 < hr && (taken[(y, x)] || taken[(y + 1, x)]) {
-                            differences.down(p, src(y + 1, x) - here);
-                        }
-                    }
-                }
-            }
+            differences.record(&taken, at, src);
         }
     }
     // Fields laid with the quilt are copied from the patches each sample came from (their
