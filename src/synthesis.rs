@@ -25,8 +25,8 @@ use crate::geometry::{
     resample_periodic, split_detail,
 };
 use crate::model::{
-    CoarseSource, Exemplar, LightLightness, MaterialModel, ModelError, PeriodicPart, Result,
-    SubspaceModel,
+    CoarseSource, Exemplar, LightLightness, LightWeights, MaterialModel, ModelError, PeriodicPart,
+    Principal, Result, SubspaceModel,
 };
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
@@ -665,6 +665,9 @@ impl MaterialModel {
             }
         }
         let mut out = out.unwrap_or_else(|| Array3::zeros((3, o.rows, o.cols)));
+        if let Some(factor) = self.light_period(o, view, light)? {
+            out.zip_mut_with(&factor, |v, &f| *v = (f64::from(*v) * f) as f32);
+        }
         if let Some(detail) = self.light_detail(cache, view, light)? {
             // Chromaticity kept, as a shadow darkens; the colours then go back to the
             // leading cluster's joint distribution, which the subspace image had before the
@@ -711,25 +714,11 @@ impl MaterialModel {
         let (Some(e), Some(Some(laid))) = (self.exemplar(), cache.structure.get()) else {
             return Ok(None);
         };
-        let Some(lights) = &e.light_weights else {
+        let Some(delta) =
+            self.own_light_coefficients(e.light_weights.as_ref(), &e.lightness, view, light)?
+        else {
             return Ok(None);
         };
-        let mut delta = vec![0.0; e.lightness.basis.len()];
-        for (v, l, w) in self.neighbouring_pairs(view, light)? {
-            if v != lights.view {
-                continue;
-            }
-            let k = self.cluster_of(v, l)?;
-            if let (Some(own), Some(cluster)) = (lights.weights.get(l), e.lightness.weights.get(k))
-            {
-                for (d, (a, b)) in delta[1..].iter_mut().zip(own.iter().zip(cluster)) {
-                    *d += w * f64::from(a - b);
-                }
-            }
-        }
-        if delta.iter().all(|&d| d == 0.0) {
-            return Ok(None);
-        }
         let detail = laid.lightness(&delta);
         Ok(Some(match e.coarse {
             CoarseSource::Mrf => {
@@ -739,6 +728,74 @@ impl MaterialModel {
             }
             CoarseSource::Laid => detail,
         }))
+    }
+
+    /// What the measured lights around `light` in `lights`' view have of their own beyond
+    /// their clusters: coefficients on `fields`' basis (0 on the mean), each neighbouring
+    /// pair's own weights less its subspace's, by the pair's weight; `None` without light
+    /// weights or where nothing is added.
+    fn own_light_coefficients(
+        &self,
+        lights: Option<&LightWeights>,
+        fields: &Principal,
+        view: &Direction,
+        light: &Direction,
+    ) -> Result<Option<Vec<f64>>> {
+        let Some(lights) = lights else {
+            return Ok(None);
+        };
+        let mut delta = vec![0.0; fields.basis.len()];
+        for (v, l, w) in self.neighbouring_pairs(view, light)? {
+            if v != lights.view {
+                continue;
+            }
+            let k = self.cluster_of(v, l)?;
+            if let (Some(own), Some(cluster)) = (lights.weights.get(l), fields.weights.get(k)) {
+                for (d, (a, b)) in delta[1..].iter_mut().zip(own.iter().zip(cluster)) {
+                    *d += w * f64::from(a - b);
+                }
+            }
+        }
+        Ok(delta.iter().any(|&d| d != 0.0).then_some(delta))
+    }
+
+    /// The factor (3, rows, cols) on linear RGB that turns the subspaces' periods laid on
+    /// the output's lattice into those of the measured lights around `light`
+    /// ([`PeriodicPart::light_weights`]): the exponential of their own deviations (the
+    /// periods are stored as logarithms); `None` where nothing changes.
+    fn light_period(
+        &self,
+        o: &SynthesisOptions,
+        view: &Direction,
+        light: &Direction,
+    ) -> Result<Option<Array3<f64>>> {
+        let Some(p) = self.periodic() else {
+            return Ok(None);
+        };
+        let Some(delta) =
+            self.own_light_coefficients(p.light_weights.as_ref(), &p.periods, view, light)?
+        else {
+            return Ok(None);
+        };
+        let mut log = vec![0.0; 3 * p.rows * p.cols];
+        for (c, b) in delta.iter().zip(&p.periods.basis) {
+            for (f, &v) in log.iter_mut().zip(b) {
+                *f += c * f64::from(v);
+            }
+        }
+        let tile = Array3::from_shape_vec((3, p.rows, p.cols), log)
+            .map_err(|e| ModelError::parameter("period", e.to_string()))?;
+        let lattice = output_lattice(p, o);
+        let mut factor = Array3::zeros((3, o.rows, o.cols));
+        for (mut out, tile) in factor.outer_iter_mut().zip(tile.outer_iter()) {
+            out.assign(&lattice::tiled(
+                &tile.mapv(f64::exp),
+                &lattice,
+                o.rows,
+                o.cols,
+            ));
+        }
+        Ok(Some(factor))
     }
 
     /// Subspace image `k` from `cache` (which must come from this model), synthesized on

@@ -1,7 +1,7 @@
 //! The periodic part of near-regular materials (issue 11): the knit keeps its weave with the
 //! generator's period, plain and tileable, and its fibres on their own threads; stochastic
 //! materials are left alone; models with the part round-trip through the file and synthesize
-//! the same bytes after it.
+//! the same bytes after it; every frontal light keeps its own period.
 
 use std::path::Path;
 
@@ -9,7 +9,7 @@ use btfmrf::analysis::{AnalysisOptions, analyze};
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction};
 use btfmrf::eval::artefacts::seam;
-use btfmrf::eval::correlation;
+use btfmrf::eval::{JUDGED_LIGHTS, Yardstick, correlation};
 use btfmrf::geometry::lattice::{self, Lattice};
 use btfmrf::model::{MaterialModel, ModelKind, format};
 use btfmrf::progress::NoProgress;
@@ -110,6 +110,9 @@ fn periodic_models_round_trip_and_synthesize_the_same_after_writing() {
     let bytes = format::to_bytes(&knit);
     let back = format::from_bytes(&bytes, Path::new("knit.btfm")).unwrap();
     assert_eq!(format::to_bytes(&back), bytes);
+    // The lights' own periods among what comes back.
+    assert!(knit.periodic().is_some_and(|p| p.light_weights.is_some()));
+    assert_eq!(back.periodic(), knit.periodic());
     // Parameters are held as the file stores them, so what is synthesized differs only by
     // the single-precision rounding of the MRF parameters (as for a model without the part),
     // which the synthesis amplifies to at most a few thousandths of linear RGB, one or two
@@ -245,4 +248,55 @@ fn a_frontal_representative_is_given_up_only_for_a_better_one() {
     let k = model.cluster_of(0, light).unwrap();
     let (view, _) = model.subspaces()[k].representative;
     assert_eq!(view, 0, "subspace {k} is represented by view {view}");
+}
+
+#[test]
+fn every_light_brings_its_own_period() {
+    // A cluster shares one subspace image, and so one period, among lights whose cast
+    // shadows and shading differ (on the built-in knit the frontal 75/195 light was
+    // represented by view 45 under 75/180); each light's own weights on the periods'
+    // deviations bring its own period back.
+    let side = 128;
+    let knit = Btf::synthetic(SyntheticMaterial::Knit, side, 5).unwrap();
+    let another = Btf::synthetic(SyntheticMaterial::Knit, side, 6).unwrap();
+    let model = |light_weights: bool| {
+        let options = AnalysisOptions {
+            light_weights,
+            ..AnalysisOptions::default()
+        };
+        analyze(&knit, &options, &NoProgress).unwrap().0
+    };
+    let (own, shared) = (model(true), model(false));
+    let weights = own.periodic().and_then(|p| p.light_weights.as_ref());
+    assert_eq!(weights.map(|w| w.weights.len()), Some(knit.lights().len()));
+    assert!(shared.periodic().is_some_and(|p| p.light_weights.is_none()));
+    let o = SynthesisOptions {
+        rows: side as usize,
+        cols: side as usize,
+        seed: 1,
+        tileable: false,
+    };
+    let view = *knit.views().get(0).unwrap();
+    let mut log_ratio = 0.0;
+    for (theta, phi) in JUDGED_LIGHTS {
+        let light = Direction::new(theta, phi);
+        let l = knit.lights().find(&light, 0.5).unwrap();
+        let y = Yardstick::from_samples(
+            &knit.image(0, l).unwrap(),
+            &another.image(0, l).unwrap(),
+            None,
+            1,
+        )
+        .unwrap();
+        let [a, b] = [&own, &shared].map(|m| {
+            y.judge(&m.synthesize_image(&view, &light, &o).unwrap())
+                .unwrap()
+                .structure_vs_crop
+        });
+        println!("knit light {theta}/{phi}: own x{a:.2}, shared x{b:.2} the crop level");
+        log_ratio += (a / b).ln();
+    }
+    let ratio = (log_ratio / JUDGED_LIGHTS.len() as f64).exp();
+    println!("own over shared: {ratio:.3}");
+    assert!(ratio < 0.97, "own over shared {ratio:.3}");
 }

@@ -31,9 +31,10 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// files (no lit lightness tables), version 8 files (exemplar L* deviations always 8-bit),
 /// version 9 files (no cast shadows), version 10 files (an exemplar's coarse variation
 /// always the MRF's), version 11 files (no light lightness tables), version 12 files (no
-/// chroma spreads), version 13 files (an exemplar at every texel) and version 14 files (no
-/// light weights on the exemplar) are still read.
-pub const VERSION: u16 = 15;
+/// chroma spreads), version 13 files (an exemplar at every texel), version 14 files (no
+/// light weights on the exemplar) and version 15 files (no light weights on the periods) are
+/// still read.
+pub const VERSION: u16 = 16;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -150,11 +151,15 @@ pub fn to_payload(model: &MaterialModel) -> Vec<u8> {
         &mut w,
         model.exemplar().and_then(|e| e.light_weights.as_ref()),
     );
+    write_light_weights(
+        &mut w,
+        model.periodic().and_then(|p| p.light_weights.as_ref()),
+    );
     w.0
 }
 
-/// The version 15 light weights of the exemplar ([`LightWeights`]): a flag, then the view
-/// (u16) and, per L* deviation, every light's weight on it quantised to 8-bit codes.
+/// Light weights ([`LightWeights`]; the exemplar's since version 15, the periods' since 16): a
+/// flag, then the view (u16) and, per deviation, every light's weight on it in 8-bit codes.
 fn write_light_weights(w: &mut Writer, weights: Option<&LightWeights>) {
     let Some(l) = weights else {
         w.u8(0);
@@ -511,7 +516,17 @@ fn range_map_record_bytes(r: &RangeMap) -> usize {
 pub fn periodic_bytes(model: &MaterialModel) -> usize {
     model.periodic().map_or(1, |p| {
         let heights = p.heights.as_ref().map_or(0, |_| 8 + 2 * p.rows * p.cols);
-        11 + principal_bytes(&p.periods, (Storage::Single, Storage::Single)) + heights
+        11 + principal_bytes(&p.periods, (Storage::Single, Storage::Single))
+            + heights
+            + light_weights_bytes(p.light_weights.as_ref())
+    })
+}
+
+/// Bytes [`write_light_weights`] writes for `weights` after its flag.
+fn light_weights_bytes(weights: Option<&LightWeights>) -> usize {
+    weights.map_or(0, |l| {
+        let deviations = l.weights.first().map_or(0, Vec::len);
+        2 + deviations * (8 + l.weights.len())
     })
 }
 
@@ -533,10 +548,7 @@ pub fn exemplar_bytes(model: &MaterialModel) -> usize {
             1 + principal_bytes(&c.fields, (Storage::Byte, Storage::Byte))
         });
         let lightness = (Storage::Byte, Storage::of(e.deviation_codes));
-        let lights = e.light_weights.as_ref().map_or(0, |l| {
-            let deviations = l.weights.first().map_or(0, Vec::len);
-            2 + deviations * (8 + l.weights.len())
-        });
+        let lights = light_weights_bytes(e.light_weights.as_ref());
         6 + principal_bytes(&e.lightness, lightness) + chroma + lights
     })
 }
@@ -949,6 +961,20 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             None => {}
         }
     }
+    let mut periodic = periodic;
+    if version >= 16 {
+        let deviations = periodic
+            .as_ref()
+            .map_or(0, |p| p.periods.basis.len().saturating_sub(1));
+        let weights = read_light_weights(&mut r, lights.len(), deviations)?;
+        match periodic.as_mut() {
+            Some(p) => p.light_weights = weights,
+            None if weights.is_some() => {
+                return Err("period light weights without a periodic part".into());
+            }
+            None => {}
+        }
+    }
     r.finish()?;
     MaterialModel::new(MaterialParts {
         views,
@@ -1297,6 +1323,7 @@ fn read_periodic(
                 cols,
                 periods,
                 heights,
+                light_weights: None,
             }))
         }
         f => Err(format!("unknown periodic part flag {f}")),

@@ -299,6 +299,11 @@ pub struct PeriodicPart {
     /// The range map's heights over one period (texels of the measured image), `rows * cols`
     /// values, exactly when the model has a range map.
     pub heights: Option<Vec<f32>>,
+    /// Every measured light's own weights on the period deviations in the range map's view,
+    /// where stored (format version 16): a light's period (its cast shadows, the shading the
+    /// relief leaves) differs from its cluster representative's, which may even be seen
+    /// from another view.
+    pub light_weights: Option<LightWeights>,
 }
 
 impl PeriodicPart {
@@ -359,15 +364,29 @@ pub struct Exemplar {
     pub light_weights: Option<LightWeights>,
 }
 
-/// The exemplar crop of every measured light in one view, as weights on the exemplar's L*
-/// deviations: a light's de-shaded detail (its cast shadows, highlights and what the
-/// relief's shading leaves) differs from its cluster representative's.
+/// Every measured light in one view as weights on the principal deviations of a
+/// [`Principal`] (the exemplar's L* crops, or the periods): a light's de-shaded detail (its
+/// cast shadows, highlights and what the relief's shading leaves) differs from its cluster
+/// representative's.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LightWeights {
-    /// The view the crops were cut in (the range map's registered view).
+    /// The view the fields were measured in (the range map's registered view).
     pub view: usize,
-    /// One row per light, in the order of the model's lights: a weight per L* deviation.
+    /// One row per light, in the order of the model's lights: a weight per deviation.
     pub weights: Vec<Vec<f32>>,
+}
+
+impl LightWeights {
+    /// Whether it holds a view of `views`, a row for each of `lights` lights and, in each, one
+    /// finite weight per deviation of `fields`.
+    fn fits(&self, views: usize, lights: usize, fields: &Principal) -> bool {
+        self.view < views
+            && self.weights.len() == lights
+            && self
+                .weights
+                .iter()
+                .all(|w| w.len() + 1 == fields.basis.len() && w.iter().all(|v| v.is_finite()))
+    }
 }
 
 /// Where a synthesis with an exemplar takes the L* variation coarser than the exemplar's
@@ -701,10 +720,13 @@ impl MaterialModel {
                 && p.heights.is_some() == parts.range_map.is_some()
                 && p.heights
                     .as_ref()
-                    .is_none_or(|h| h.len() == p.rows * p.cols && finite(h)))
+                    .is_none_or(|h| h.len() == p.rows * p.cols && finite(h))
+                && p.light_weights
+                    .as_ref()
+                    .is_none_or(|l| p.heights.is_some() && l.fits(nv, nl, &p.periods)))
             {
                 return bad(format!(
-                    "periodic part: periods {} x {} ({MIN_PERIOD}..={MAX_COUNT}), {} x {} samples (1..={MAX_TILE_SAMPLES}), {} basis periods (1..={}) of 3 x samples finite values, {} weight rows for {clusters} subspaces (one finite weight per deviation), heights {} with range map {}",
+                    "periodic part: periods {} x {} ({MIN_PERIOD}..={MAX_COUNT}), {} x {} samples (1..={MAX_TILE_SAMPLES}), {} basis periods (1..={}) of 3 x samples finite values, {} weight rows for {clusters} subspaces (one finite weight per deviation), heights {} with range map {}, light weights only with heights (a view of {nv}, {nl} rows of one finite weight per deviation)",
                     p.lattice.rows,
                     p.lattice.cols,
                     p.rows,
@@ -744,11 +766,7 @@ impl MaterialModel {
         }
         if let Some(e) = &parts.exemplar
             && let Some(l) = &e.light_weights
-            && (l.view >= nv
-                || l.weights.len() != nl
-                || !l.weights.iter().all(|w| {
-                    w.len() + 1 == e.lightness.basis.len() && w.iter().all(|v| v.is_finite())
-                }))
+            && !l.fits(nv, nl, &e.lightness)
         {
             return bad(format!(
                 "exemplar light weights for view {} of {nv}, {} rows for {nl} lights (one finite weight per L* deviation)",
@@ -1279,6 +1297,7 @@ mod tests {
                 weights: vec![vec![1.0], vec![-6.0]],
             },
             heights: None,
+            light_weights: None,
         };
         let model = MaterialModel::new(MaterialParts {
             periodic: Some(periodic.clone()),
@@ -1335,6 +1354,14 @@ mod tests {
             },
             PeriodicPart {
                 heights: Some(vec![0.0; 6]),
+                ..periodic.clone()
+            },
+            // Light weights need the range map's heights (none here).
+            PeriodicPart {
+                light_weights: Some(LightWeights {
+                    view: 0,
+                    weights: vec![vec![0.5]; 3],
+                }),
                 ..periodic.clone()
             },
         ] {
