@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use crate::btf::Btf;
 use crate::decompose::colour_transfer::ColourMarginals;
 use crate::decompose::marginals::{self, QuantileGrid, Quantiles};
-use crate::decompose::pyramid::auto_levels;
+use crate::decompose::pyramid::{self, auto_levels};
 use crate::decompose::stationarity::{NON_STATIONARY_SHARE, block_mean_share};
 use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceClustering};
 use crate::geometry::lattice::{self, Lattice};
@@ -19,9 +19,9 @@ use crate::geometry::relight::Shadows;
 use crate::geometry::{self, detail_scale, relight};
 use crate::model::{
     AnyLevels, BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma,
-    LightLightness, LightWeights, LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS,
-    MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, ModelError, ModelKind,
-    PeriodicPart, Principal, RangeMap, Result, SubspaceModel, format,
+    LIGHTNESS_BANDS, LightLightness, LightWeights, LitMarginals, MAX_CHROMA_STEP,
+    MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
+    ModelError, ModelKind, PeriodicPart, Principal, RangeMap, Result, SubspaceModel, format,
 };
 use crate::mrf::{BandModel, KindVisitor, Levels, Repair, neighbourhood::MAX_ORDER};
 use crate::progress::Progress;
@@ -62,10 +62,10 @@ pub struct AnalysisOptions {
     /// subspace image) and give the subspace image that lightness marginal once relit for the
     /// representative's light ([`crate::model::LitMarginals`]). Default: true.
     pub lit_matching: bool,
-    /// Beside a range map, store the measured L* quantiles under every light in the view
-    /// the map is registered with (74 bytes a light) and give the finished image that
-    /// lightness marginal, blended over the nearest lights
-    /// ([`crate::model::LightLightness`]). Default: true.
+    /// Beside a range map, store the measured L* quantiles and detail band spreads under
+    /// every light in the view the map is registered with (79 bytes a light) and give the
+    /// finished image those bands and that lightness marginal, blended over the nearest
+    /// lights ([`crate::model::LightLightness`]). Default: true.
     pub light_tables: bool,
     /// Beside a range map and an exemplar (not on a lattice), store every light's own weights
     /// on the exemplar's L* deviations, its crop in the registered view projected on them
@@ -488,7 +488,7 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
                 }),
                 light_weights: (!own.is_empty()).then(|| LightWeights {
                     view: frontal,
-                    weights: format::as_stored_light_weights(&own),
+                    weights: format::as_stored_light_rows(&own),
                 }),
             })
         }
@@ -655,19 +655,40 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
     })
 }
 
-/// The measured L* quantiles of every light's image in `view` ([`LightLightness`]).
+/// The measured L* quantiles and detail band spreads of every light's image in `view`
+/// ([`LightLightness`]); no spreads where the image halves too few times for every band.
 fn light_lightness(btf: &Btf, view: usize) -> Result<LightLightness> {
     let probabilities = marginals::band_probabilities();
-    let tables = (0..btf.lights().len())
+    let (tables, spreads): (Vec<_>, Vec<_>) = (0..btf.lights().len())
         .into_par_iter()
         .map(|l| {
             let [lightness, _, _] = ColourSpace::Lab.planes(&btf.image(view, l)?);
-            Ok(LitMarginals {
-                lightness: marginals::quantiles_at(&lightness, &probabilities),
-            })
+            let spreads: Vec<f32> = pyramid::detail_spreads(&lightness, LIGHTNESS_BANDS)
+                .into_iter()
+                .map(|s| s as f32)
+                .collect();
+            Ok((
+                LitMarginals {
+                    lightness: marginals::quantiles_at(&lightness, &probabilities),
+                },
+                spreads,
+            ))
         })
-        .collect::<Result<Vec<_>>>()?;
-    Ok(LightLightness { view, tables })
+        .collect::<Result<Vec<_>>>()?
+        .into_iter()
+        .unzip();
+    let whole = spreads.iter().all(|s| s.len() == LIGHTNESS_BANDS);
+    let spreads = whole.then(|| {
+        format::as_stored_light_rows(&spreads)
+            .into_iter()
+            .map(|row| std::array::from_fn(|k| row[k]))
+            .collect()
+    });
+    Ok(LightLightness {
+        view,
+        tables,
+        spreads,
+    })
 }
 
 /// `model` with its exemplar where it takes its coarse variation from (`coarse`, see
@@ -721,7 +742,16 @@ fn judged_exemplar(
     if candidates.len() == 1 {
         return Ok(candidates.swap_remove(0).0);
     }
-    let models: Vec<&MaterialModel> = candidates.iter().map(|(m, _)| m).collect();
+    // Judged without the light tables' band spreads, which every candidate gets alike: they
+    // bring any candidate's bands to the measured spreads at the judged size and lights, and
+    // hid what the exemplar adds beyond them (the 256^2 built-in leather's check then chose
+    // no exemplar, and its enlargement to 512^2 went from x1.95 to x3.14 the another-crop
+    // level).
+    let judged_models = candidates
+        .iter()
+        .map(|(m, _)| without_band_spreads(m))
+        .collect::<Result<Vec<_>>>()?;
+    let models: Vec<&MaterialModel> = judged_models.iter().collect();
     let distances = judged_distances(btf, &models, judged)?;
     // Too small to judge: no evidence either way, so the fewest parts.
     let best = distances
@@ -737,6 +767,15 @@ fn judged_exemplar(
         })
         .unwrap_or(0);
     Ok(candidates.swap_remove(best).0)
+}
+
+/// `model` without the band spreads of its light tables, if any.
+fn without_band_spreads(model: &MaterialModel) -> Result<MaterialModel> {
+    let mut parts = model.clone().into_parts();
+    if let Some(t) = &mut parts.light_lightness {
+        t.spreads = None;
+    }
+    MaterialModel::new(parts)
 }
 
 /// Per model, its structure distance summed over the `judged` pairs (seed 1, on the measured
@@ -1443,7 +1482,7 @@ fn exemplar_from(
     );
     let light_weights = lights.map(|l| LightWeights {
         view: l.view,
-        weights: format::as_stored_light_weights(&lightness.weights.split_off(crops.len())),
+        weights: format::as_stored_light_rows(&lightness.weights.split_off(crops.len())),
     });
     let chroma = budget.chroma.map(|chroma_budget| {
         let fields: Vec<Vec<f64>> = crops

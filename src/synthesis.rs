@@ -15,6 +15,7 @@ use rayon::prelude::*;
 
 use crate::btf::{Direction, Weighted};
 use crate::decompose::marginals::{self, MarginalMap};
+use crate::decompose::pyramid::{exact_levels, spread};
 use crate::decompose::{Border, ColourSpace, Pyramid};
 use crate::geometry::integrate::{Edges, normals_of, normals_of_periodic};
 use crate::geometry::lattice::{self, Lattice};
@@ -25,8 +26,8 @@ use crate::geometry::{
     resample_periodic, split_detail,
 };
 use crate::model::{
-    CoarseSource, Exemplar, LightLightness, LightWeights, MaterialModel, ModelError, PeriodicPart,
-    Principal, Result, SubspaceModel,
+    CoarseSource, Exemplar, LIGHTNESS_BANDS, LightLightness, LightWeights, MaterialModel,
+    ModelError, PeriodicPart, Principal, Result, SubspaceModel,
 };
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
@@ -637,9 +638,14 @@ impl MaterialModel {
         // The cluster's subspace image was matched at its representative's light only; the
         // measured lightness of the requested light itself finishes it.
         if let Some(tables) = self.light_lightness()
-            && let Some((table, share)) = light_table(self, tables, view, light)?
+            && let Some(target) = light_target(self, tables, view, light)?
         {
-            match_lightness(&mut out, None, &table, share);
+            if let Some(spreads) = &target.spreads {
+                let finest = finest_held_band(self.range_map().map_or(1, |m| m.step));
+                let border = cache.options.border();
+                respread_lightness(&mut out, spreads, (target.share, finest), border);
+            }
+            match_lightness(&mut out, None, &target.lightness, target.share);
         }
         Ok(out)
     }
@@ -1020,15 +1026,25 @@ fn scale_pixels(image: &mut Array3<f32>, ratio: &Array2<f64>) {
         .for_each(|mut channel| channel.zip_mut_with(ratio, |v, &r| *v *= r as f32));
 }
 
-/// The L* quantiles `tables` holds for `light` seen from `view`, blended over the nearest
-/// lights with their barycentric weights, and the share of `view` that is the tables' view
-/// (its barycentric weight); `None` where that share is 0.
-fn light_table(
+/// What the light tables ask of an image under (`view`, `light`): the L* table and detail
+/// band spreads blended over the nearest lights (the images' barycentric weights), and the
+/// share the tables' view has in `view` (its barycentric weight, at most 1).
+struct LightTarget {
+    /// L* quantiles at the band probabilities.
+    lightness: Vec<f64>,
+    /// Spread of each L* detail band, finest first, where the model stores them.
+    spreads: Option<Vec<f64>>,
+    /// How far the image is taken to them (0..=1).
+    share: f64,
+}
+
+/// The [`LightTarget`] of `tables` for (`view`, `light`); `None` away from the tables' view.
+fn light_target(
     model: &MaterialModel,
     tables: &LightLightness,
     view: &Direction,
     light: &Direction,
-) -> Result<Option<(Vec<f64>, f64)>> {
+) -> Result<Option<LightTarget>> {
     let share: f64 = model
         .views()
         .interpolate(view)?
@@ -1039,15 +1055,72 @@ fn light_table(
     if share <= 0.0 {
         return Ok(None);
     }
-    let mut blended = vec![0.0; marginals::BAND_QUANTILES];
+    let mut lightness = vec![0.0; marginals::BAND_QUANTILES];
+    let mut spreads = tables.spreads.as_ref().map(|_| vec![0.0; LIGHTNESS_BANDS]);
     for w in model.lights().interpolate(light)? {
         if let Some(t) = tables.tables.get(w.index) {
-            for (b, v) in blended.iter_mut().zip(&t.lightness) {
+            for (b, v) in lightness.iter_mut().zip(&t.lightness) {
                 *b += w.weight * v;
             }
         }
+        if let (Some(blend), Some(s)) = (
+            &mut spreads,
+            tables.spreads.as_ref().and_then(|s| s.get(w.index)),
+        ) {
+            for (b, &v) in blend.iter_mut().zip(s) {
+                *b += w.weight * f64::from(v);
+            }
+        }
     }
-    Ok(Some((blended, share.min(1.0))))
+    Ok(Some(LightTarget {
+        lightness,
+        spreads,
+        share: share.min(1.0),
+    }))
+}
+
+/// The finest Laplacian band (band `k` holds periods of 2^(k+1) to 2^(k+2) pixels) that a
+/// structure sampled every `step` pixels holds: one whose periods all lie at or below its
+/// Nyquist period (`2 * step`) holds no content of its own, and scaling it to the measured
+/// spread only amplifies noise (the painted-door capture, sampled every 4 pixels: x0.71 the
+/// another-crop level with its two finest bands left alone, x1.00 with every band scaled).
+fn finest_held_band(step: usize) -> usize {
+    (0..LIGHTNESS_BANDS)
+        .find(|&k| (2usize << k) > step)
+        .unwrap_or(LIGHTNESS_BANDS)
+}
+
+/// The largest factor by which [`respread_lightness`] scales an L* band: a band the synthesis
+/// nearly lacks is not blown up from rounding noise.
+const MAX_LIGHTNESS_GAIN: f64 = 4.0;
+
+/// Scales each detail band of `image`'s L* pyramid from band `finest` on, `share` of the way
+/// to its spread in `wanted` (finest first; chromaticity kept, as [`shift_lightness`]);
+/// `border` as the output's. A tileable image is split only as far as it halves exactly.
+fn respread_lightness(
+    image: &mut Array3<f32>,
+    wanted: &[f64],
+    (share, finest): (f64, usize),
+    border: Border,
+) {
+    let (_, rows, cols) = image.dim();
+    let levels = match border {
+        Border::Periodic => exact_levels(rows, cols, LIGHTNESS_BANDS + 1),
+        Border::Mirror => LIGHTNESS_BANDS + 1,
+    };
+    let lightness = crate::geometry::relight::luminance(image)
+        .mapv(|y| f64::from(crate::color::lightness(y as f32)));
+    let mut pyramid = Pyramid::decompose_with(&lightness, levels, border);
+    let details = pyramid.bands.len() - 1;
+    for (band, &want) in pyramid.bands[..details].iter_mut().zip(wanted).skip(finest) {
+        let have = spread(band);
+        if have > 1e-9 {
+            let gain = 1.0 + share * ((want / have).min(MAX_LIGHTNESS_GAIN) - 1.0);
+            band.mapv_inplace(|v| gain * v);
+        }
+    }
+    let delta = pyramid.collapse_with(border) - &lightness;
+    shift_lightness(image, &delta);
 }
 
 /// Relit luminance below which [`match_lit`] leaves a pixel as it is (a ratio of noise).
@@ -1188,6 +1261,61 @@ pub fn relief_factor(
 mod tests {
     use super::*;
     use crate::model::LitMarginals;
+
+    #[test]
+    fn bands_finer_than_the_samples_are_left_alone() {
+        // Band k holds periods of 2^(k+1) to 2^(k+2) pixels; samples every `step` pixels hold
+        // periods from 2 * step.
+        for (step, finest) in [(1, 0), (2, 1), (3, 1), (4, 2), (7, 2), (8, 3), (64, 5)] {
+            assert_eq!(finest_held_band(step), finest, "step {step}");
+        }
+    }
+
+    #[test]
+    fn respread_bands_take_the_wanted_spreads_and_the_rest_stays() {
+        // A mid-grey image with detail at every scale, colour kept per pixel.
+        let (rows, cols) = (96, 80);
+        let image = Array3::from_shape_fn((3, rows, cols), |(c, y, x)| {
+            let v = 0.25
+                + 0.05 * ((x as f64) * 1.7).sin()
+                + 0.04 * ((y as f64) * 0.45).cos()
+                + 0.03 * ((x + 2 * y) as f64 * 0.13).sin();
+            (v * (0.9 + 0.1 * c as f64)) as f32
+        });
+        let bands = |image: &Array3<f32>| {
+            let [l, _, _] = ColourSpace::Lab.planes(image);
+            crate::decompose::pyramid::detail_spreads(&l, LIGHTNESS_BANDS)
+        };
+        let before = bands(&image);
+        let wanted: Vec<f64> = before.iter().map(|s| 1.3 * s).collect();
+        let mut out = image.clone();
+        respread_lightness(&mut out, &wanted, (1.0, 1), Border::Mirror);
+        let after = bands(&out);
+        // The finest band is left as it was (up to what the others leak into it: scaled bands
+        // are not a Laplacian pyramid of anything, so the image they collapse to splits into
+        // slightly different ones), every other one comes most of the way to its wanted spread
+        // (from 23 % below it).
+        assert!(
+            (after[0] / before[0] - 1.0).abs() < 0.05,
+            "{after:?} {before:?}"
+        );
+        for k in 1..LIGHTNESS_BANDS {
+            assert!(
+                (after[k] / wanted[k] - 1.0).abs() < 0.1,
+                "band {k}: {after:?} {wanted:?}"
+            );
+        }
+        // Halfway: about half the gain.
+        let mut half = image.clone();
+        respread_lightness(&mut half, &wanted, (0.5, 0), Border::Mirror);
+        for (k, (a, b)) in bands(&half).iter().zip(&before).enumerate() {
+            assert!((a / b - 1.15).abs() < 0.06, "band {k}: {a} from {b}");
+        }
+        // Chromaticity kept: the channels' ratios do not move.
+        for (o, i) in out.lanes(Axis(0)).into_iter().zip(image.lanes(Axis(0))) {
+            assert!((o[2] / o[0] - i[2] / i[0]).abs() < 1e-4);
+        }
+    }
 
     #[test]
     fn relighting_at_the_measured_light_undoes_the_de_shading_even_in_deep_shadow() {

@@ -12,7 +12,7 @@ use ndarray::{Array2, Zip};
 use rayon::prelude::*;
 
 use super::marginals::{self, MarginalMap, band_probabilities, quantiles_at};
-use super::pyramid::{Border, Pyramid};
+use super::pyramid::{Border, Pyramid, exact_levels, spread};
 
 /// Orthonormal colour bases the marginals are matched along: the colour axes themselves
 /// (last at synthesis, so the L*, a*, b* marginals end exact) and three fixed rotations.
@@ -181,31 +181,6 @@ const MAX_CHROMA_GAIN: f64 = 4.0;
 /// L* alone; the passes that follow match the marginals again) brings the leather's chroma to
 /// 1.0-1.2x the measured at 4 and 12 px.
 pub type ChromaSpread = Vec<[f64; 2]>;
-
-/// The standard deviation of `plane`'s values, in two passes (the mean, then the squared
-/// deviations) that the compiler vectorises: ndarray's one-pass `std` updates a running mean
-/// per value and took about 5 % of a 1024^2 synthesis's processor time.
-fn spread(plane: &Array2<f64>) -> f64 {
-    let n = plane.len();
-    if n == 0 {
-        return 0.0;
-    }
-    let mean = plane.sum() / n as f64;
-    let squares = plane.fold(0.0, |acc, &v| acc + (v - mean) * (v - mean));
-    (squares / n as f64).sqrt()
-}
-
-/// The most pyramid levels `(rows, cols)` halves exactly for (a tileable plane's bands wrap
-/// around only then), capped at `cap`.
-fn exact_levels(rows: usize, cols: usize, cap: usize) -> usize {
-    let mut levels = 1;
-    let (mut r, mut c) = (rows, cols);
-    while levels < cap && r.is_multiple_of(2) && c.is_multiple_of(2) && r >= 2 && c >= 2 {
-        (r, c) = (r / 2, c / 2);
-        levels += 1;
-    }
-    levels
-}
 
 /// How many bands of a pyramid of `bands` bands (the last the coarse rest, of `rest` samples)
 /// have a measured spread: every detail band, and the rest when it is the full pyramid's and

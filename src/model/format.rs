@@ -4,10 +4,10 @@
 use std::path::Path;
 
 use super::material::{
-    BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LightLightness,
-    LightWeights, LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_EXEMPLAR_STEP,
-    MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, PeriodicPart, Principal,
-    RangeMap, SubspaceModel,
+    BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LIGHTNESS_BANDS,
+    LightLightness, LightWeights, LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS,
+    MAX_EXEMPLAR_STEP, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
+    PeriodicPart, Principal, RangeMap, SubspaceModel,
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
@@ -155,11 +155,12 @@ pub fn to_payload(model: &MaterialModel) -> Vec<u8> {
         &mut w,
         model.periodic().and_then(|p| p.light_weights.as_ref()),
     );
+    write_light_spreads(&mut w, model.light_lightness());
     w.0
 }
 
 /// Light weights ([`LightWeights`]; the exemplar's since version 15, the periods' since 16): a
-/// flag, then the view (u16) and, per deviation, every light's weight on it in 8-bit codes.
+/// flag, then the view (u16) and the light rows ([`write_light_rows`]).
 fn write_light_weights(w: &mut Writer, weights: Option<&LightWeights>) {
     let Some(l) = weights else {
         w.u8(0);
@@ -167,22 +168,27 @@ fn write_light_weights(w: &mut Writer, weights: Option<&LightWeights>) {
     };
     w.u8(1);
     w.u16(l.view as u16);
-    for column in light_columns(&l.weights) {
+    write_light_rows(w, &l.weights);
+}
+
+/// One row of values a light, all of one length, stored column by column: each column (every
+/// light's value in turn) quantised to 8-bit codes.
+fn write_light_rows<R: AsRef<[f32]>>(w: &mut Writer, rows: &[R]) {
+    for column in light_columns(rows) {
         write_quantised(w, &column, Storage::Byte);
     }
 }
 
-/// The weights of every light on each deviation in turn (the file's order).
-fn light_columns(rows: &[Vec<f32>]) -> Vec<Vec<f64>> {
-    let deviations = rows.first().map_or(0, Vec::len);
-    (0..deviations)
-        .map(|j| rows.iter().map(|r| f64::from(r[j])).collect())
+/// The rows' values column by column (the file's order).
+fn light_columns<R: AsRef<[f32]>>(rows: &[R]) -> Vec<Vec<f64>> {
+    let columns = rows.first().map_or(0, |r| r.as_ref().len());
+    (0..columns)
+        .map(|j| rows.iter().map(|r| f64::from(r.as_ref()[j])).collect())
         .collect()
 }
 
-/// Every light's weights as a version 15 file stores ([`write_light_weights`]) and reads them
-/// back.
-pub fn as_stored_light_weights(rows: &[Vec<f32>]) -> Vec<Vec<f32>> {
+/// Light rows (weights, spreads) as a file stores ([`write_light_rows`]) and reads them back.
+pub fn as_stored_light_rows<R: AsRef<[f32]>>(rows: &[R]) -> Vec<Vec<f32>> {
     let columns: Vec<Vec<f32>> = light_columns(rows)
         .iter()
         .map(|c| {
@@ -197,7 +203,23 @@ pub fn as_stored_light_weights(rows: &[Vec<f32>]) -> Vec<Vec<f32>> {
         .collect()
 }
 
-/// Reads what [`write_light_weights`] wrote, for `lights` lights and `deviations` L*
+/// Reads what [`write_light_rows`] wrote: `columns` values for each of `lights` lights.
+fn read_light_rows(
+    r: &mut Reader,
+    lights: usize,
+    columns: usize,
+    what: &str,
+) -> Parse<Vec<Vec<f32>>> {
+    r.ensure(columns, 8 + lights, what)?;
+    let columns = (0..columns)
+        .map(|_| read_stored(r, lights, Storage::Byte, what))
+        .collect::<Parse<Vec<_>>>()?;
+    Ok((0..lights)
+        .map(|l| columns.iter().map(|c| c[l]).collect())
+        .collect())
+}
+
+/// Reads what [`write_light_weights`] wrote, for `lights` lights and `deviations`
 /// deviations.
 fn read_light_weights(
     r: &mut Reader,
@@ -208,14 +230,41 @@ fn read_light_weights(
         return Ok(None);
     }
     let view = usize::from(r.u16()?);
-    r.ensure(deviations, 8 + lights, "light weights")?;
-    let columns = (0..deviations)
-        .map(|_| read_stored(r, lights, Storage::Byte, "light weight"))
-        .collect::<Parse<Vec<_>>>()?;
-    let weights = (0..lights)
-        .map(|l| columns.iter().map(|c| c[l]).collect())
-        .collect();
+    let weights = read_light_rows(r, lights, deviations, "light weight")?;
     Ok(Some(LightWeights { view, weights }))
+}
+
+/// The version 16 band spreads of the light lightness tables ([`LightLightness::spreads`]): a
+/// flag, then the light rows ([`write_light_rows`]), [`LIGHTNESS_BANDS`] values a light.
+fn write_light_spreads(w: &mut Writer, tables: Option<&LightLightness>) {
+    let Some(spreads) = tables.and_then(|t| t.spreads.as_ref()) else {
+        w.u8(0);
+        return;
+    };
+    w.u8(1);
+    write_light_rows(w, spreads);
+}
+
+/// Reads what [`write_light_spreads`] wrote into `tables` (which must be there when the flag
+/// says spreads follow), for `lights` lights.
+fn read_light_spreads(
+    r: &mut Reader,
+    tables: Option<&mut LightLightness>,
+    lights: usize,
+) -> Parse<()> {
+    if r.u8_at_most(1, "light spreads flag")? == 0 {
+        return Ok(());
+    }
+    let Some(t) = tables else {
+        return Err("light band spreads without light lightness tables".into());
+    };
+    let rows = read_light_rows(r, lights, LIGHTNESS_BANDS, "light band spread")?;
+    t.spreads = Some(
+        rows.into_iter()
+            .map(|row| std::array::from_fn(|k| row[k]))
+            .collect(),
+    );
+    Ok(())
 }
 
 /// The version 12 light lightness tables ([`LightLightness`]): a flag, then the view (u16) and
@@ -246,7 +295,11 @@ fn read_light_lightness(r: &mut Reader, lights: usize) -> Parse<Option<LightLigh
             })
         })
         .collect::<Parse<Vec<_>>>()?;
-    Ok(Some(LightLightness { view, tables }))
+    Ok(Some(LightLightness {
+        view,
+        tables,
+        spreads: None,
+    }))
 }
 
 /// Bytes one quantile table at [`BAND_QUANTILES`] probabilities takes in the file (band,
@@ -260,9 +313,14 @@ pub fn light_lightness_bytes(model: &MaterialModel) -> usize {
         .map_or(0, light_lightness_record_bytes)
 }
 
-/// Bytes [`write_light_lightness`] writes for `t` after the flag: the view and the tables.
+/// Bytes [`write_light_lightness`] writes for `t` after the flag (the view and the tables),
+/// and [`write_light_spreads`] after its flag.
 fn light_lightness_record_bytes(t: &LightLightness) -> usize {
-    2 + t.tables.len() * TABLE_BYTES
+    let spreads = t
+        .spreads
+        .as_ref()
+        .map_or(0, |s| LIGHTNESS_BANDS * (8 + s.len()));
+    2 + t.tables.len() * TABLE_BYTES + spreads
 }
 
 /// The version 8 lit lightness tables ([`LitMarginals`]): a flag, then one table a subspace
@@ -944,7 +1002,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
     if version >= 8 {
         read_lit_marginals(&mut r, &mut subspaces)?;
     }
-    let light_lightness = if version >= 12 {
+    let mut light_lightness = if version >= 12 {
         read_light_lightness(&mut r, lights.len())?
     } else {
         None
@@ -974,6 +1032,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
             }
             None => {}
         }
+        read_light_spreads(&mut r, light_lightness.as_mut(), lights.len())?;
     }
     r.finish()?;
     MaterialModel::new(MaterialParts {
@@ -1525,7 +1584,7 @@ mod tests {
             .collect();
         let weights = LightWeights {
             view: 2,
-            weights: as_stored_light_weights(&rows),
+            weights: as_stored_light_rows(&rows),
         };
         for (a, b) in weights.weights.iter().flatten().zip(rows.iter().flatten()) {
             assert!((a - b).abs() < 2e-3, "{a} stored for {b}");
@@ -1560,6 +1619,7 @@ mod tests {
                         .collect(),
                 })
                 .collect(),
+            spreads: None,
         };
         let mut w = Writer(Vec::new());
         write_light_lightness(&mut w, Some(&tables));
@@ -1586,6 +1646,49 @@ mod tests {
         assert!(e.contains("light lightness tables"), "{e}");
         let e = read_light_lightness(&mut Reader::new(&[2]), 5).unwrap_err();
         assert!(e.contains("light lightness flag"), "{e}");
+    }
+
+    #[test]
+    fn light_spreads_read_back_as_stored_in_their_counted_bytes() {
+        let spreads: Vec<[f32; LIGHTNESS_BANDS]> = (0..4)
+            .map(|l| std::array::from_fn(|k| 0.5 + l as f32 + 2.0 * k as f32))
+            .collect();
+        let stored: Vec<[f32; LIGHTNESS_BANDS]> = as_stored_light_rows(&spreads)
+            .into_iter()
+            .map(|r| std::array::from_fn(|k| r[k]))
+            .collect();
+        let tables = LightLightness {
+            view: 0,
+            tables: vec![
+                LitMarginals {
+                    lightness: vec![0.0; BAND_QUANTILES]
+                };
+                4
+            ],
+            spreads: Some(stored),
+        };
+        let mut w = Writer(Vec::new());
+        write_light_spreads(&mut w, Some(&tables));
+        let record = light_lightness_record_bytes(&tables)
+            - light_lightness_record_bytes(&LightLightness {
+                spreads: None,
+                ..tables.clone()
+            });
+        assert_eq!(w.0.len(), 1 + record);
+        let mut read = LightLightness {
+            spreads: None,
+            ..tables.clone()
+        };
+        read_light_spreads(&mut Reader::new(&w.0), Some(&mut read), 4).unwrap();
+        assert_eq!(read, tables);
+        // Spreads without tables, or more lights than the bytes hold: refused.
+        let e = read_light_spreads(&mut Reader::new(&w.0), None, 4).unwrap_err();
+        assert!(e.contains("without light lightness tables"), "{e}");
+        let e = read_light_spreads(&mut Reader::new(&w.0), Some(&mut read), 5).unwrap_err();
+        assert!(e.contains("light band spread"), "{e}");
+        let mut none = Writer(Vec::new());
+        write_light_spreads(&mut none, None);
+        assert_eq!(none.0, [0]);
     }
 
     #[test]

@@ -85,7 +85,18 @@ pub struct LightLightness {
     pub view: usize,
     /// One table per light, in the order of the model's lights.
     pub tables: Vec<LitMarginals>,
+    /// Per light, in the order of the model's lights, the standard deviation of the measured
+    /// L* in each detail band of its Laplacian pyramid, finest first (Lab units; format
+    /// version 16, `None` before): synthesis scales its bands to them after the table. The
+    /// laid exemplar and the relit relief left the built-in leather's bands at 4-16 px 10-26 %
+    /// too strong and its coarsest 30-40 % too weak.
+    pub spreads: Option<Vec<[f32; LIGHTNESS_BANDS]>>,
 }
+
+/// Detail bands of the L* pyramid whose spread [`LightLightness::spreads`] keeps: about 1 to
+/// 16 px. The coarse rest is left out: an enlargement's rest holds scales the measured image
+/// has no sample of.
+pub const LIGHTNESS_BANDS: usize = 5;
 
 impl LitMarginals {
     /// Whether the table holds [`BAND_QUANTILES`] non-decreasing finite values.
@@ -755,12 +766,16 @@ impl MaterialModel {
             && (parts.range_map.is_none()
                 || t.view >= nv
                 || t.tables.len() != nl
-                || !t.tables.iter().all(LitMarginals::is_table))
+                || !t.tables.iter().all(LitMarginals::is_table)
+                || t.spreads.as_ref().is_some_and(|s| {
+                    s.len() != nl || !s.iter().flatten().all(|v| v.is_finite() && *v >= 0.0)
+                }))
         {
             return bad(format!(
-                "light lightness tables for view {} of {nv}, {} tables for {nl} lights (each {BAND_QUANTILES} non-decreasing finite values), range map {}",
+                "light lightness tables for view {} of {nv}, {} tables for {nl} lights (each {BAND_QUANTILES} non-decreasing finite values), {} band spreads (one row a light, finite, not negative), range map {}",
                 t.view,
                 t.tables.len(),
+                t.spreads.as_ref().map_or(0, Vec::len),
                 parts.range_map.is_some()
             ));
         }
@@ -1151,6 +1166,7 @@ mod tests {
         let lights = |view: usize, count: usize| LightLightness {
             view,
             tables: vec![lit.clone(); count],
+            spreads: Some(vec![[1.0; LIGHTNESS_BANDS]; count]),
         };
         let with_map = |p: &mut MaterialParts| p.range_map = Some(flat_map(6));
         assert!(
@@ -1177,6 +1193,19 @@ mod tests {
             p.light_lightness = Some(t);
         });
         assert!(e.contains("light lightness tables"), "{e}");
+        // Band spreads: a row a light, none negative or not finite.
+        for broken in [
+            vec![[1.0; LIGHTNESS_BANDS]; 2],
+            vec![[-1.0; LIGHTNESS_BANDS]; 3],
+        ] {
+            let e = refused(|p| {
+                with_map(p);
+                let mut t = lights(0, 3);
+                t.spreads = Some(broken.clone());
+                p.light_lightness = Some(t);
+            });
+            assert!(e.contains("band spreads"), "{e}");
+        }
         let e = refused(|p| {
             p.exemplar = Some(Exemplar {
                 rows: 2,

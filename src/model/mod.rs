@@ -7,8 +7,8 @@ mod material;
 pub use crate::mrf::{AnyLevels, ModelKind};
 pub use error::{ModelError, Result};
 pub use material::{
-    BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LightLightness,
-    LightWeights, LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS, MAX_EXEMPLAR_STEP,
-    MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts, PeriodicPart, Principal,
-    RangeMap, SubspaceModel,
+    BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LIGHTNESS_BANDS,
+    LightLightness, LightWeights, LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS,
+    MAX_EXEMPLAR_STEP, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
+    PeriodicPart, Principal, RangeMap, SubspaceModel,
 };

@@ -147,8 +147,12 @@ pub struct Args {
     /// representative's light only. On the built-in materials (128^2, nine measured frontal lights,
     /// seeds 1-4) colour went from 0.56-1.50 to 0.25-0.66 Lab and structure from x1.26-4.72 to
     /// x1.12-4.28 the another-crop level; halfway between measured lights the leather, stones and
-    /// knit still gain and the sponge loses 3-5 % of structure. 6 KB for 81 lights. `render`
-    /// and `view` do not apply them yet.
+    /// knit still gain and the sponge loses 3-5 % of structure. 6 KB for 81 lights. The
+    /// tables also hold the spread of each light's L* in five detail bands (about 2 to 64 px
+    /// periods; 5 bytes a light), to which the image's bands are scaled before the mapping
+    /// (bands finer than the range map's samples are left alone): structure x1.24 / 1.47 /
+    /// 1.00 / 3.95 -> x1.17 / 1.43 / 0.96 / 3.78 on sponge / stones / leather / knit at the
+    /// measured lights (seeds 1-4). `render` and `view` do not apply them yet.
     #[arg(long)]
     no_light_tables: bool,
     /// Do not store every light's own weights on the exemplar's L* deviations (only beside a

@@ -137,7 +137,12 @@ fn model_parts(m: &MaterialModel) -> Vec<ModelPart> {
             "light tables",
             format::light_lightness_bytes(m),
             format!(
-                "L* quantiles under each of {} lights in view {}",
+                "L* quantiles{} under each of {} lights in view {}",
+                if t.spreads.is_some() {
+                    " and detail band spreads"
+                } else {
+                    ""
+                },
                 t.tables.len(),
                 t.view
             ),
