@@ -6,6 +6,8 @@
 
 use std::path::PathBuf;
 
+mod common;
+
 use btfmrf::analysis::{AnalysisOptions, ReliefLayout, analyze};
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction};
@@ -491,38 +493,7 @@ fn every_light_brings_its_own_exemplar_detail() {
         Some(sponge.lights().len())
     );
     assert!(shared.exemplar().is_some_and(|e| e.light_weights.is_none()));
-    let o = SynthesisOptions {
-        rows: side as usize,
-        cols: side as usize,
-        seed: 1,
-        tileable: false,
-    };
-    let view = *sponge.views().get(0).unwrap();
-    let mut log_ratio = 0.0;
-    for (theta, phi) in JUDGED_LIGHTS {
-        let light = Direction::new(theta, phi);
-        let l = sponge.lights().find(&light, 0.5).unwrap();
-        let y = Yardstick::from_samples(
-            &sponge.image(0, l).unwrap(),
-            &another.image(0, l).unwrap(),
-            None,
-            1,
-        )
-        .unwrap();
-        let [a, b] = [&own, &shared].map(|m| {
-            y.judge(&m.synthesize_image(&view, &light, &o).unwrap())
-                .unwrap()
-        });
-        println!(
-            "sponge light {theta}/{phi}: own x{:.2} ({:.2} Lab), shared x{:.2} ({:.2} Lab) the crop level",
-            a.structure_vs_crop,
-            a.judgement.colour_lab,
-            b.structure_vs_crop,
-            b.judgement.colour_lab
-        );
-        log_ratio += (a.structure_vs_crop / b.structure_vs_crop).ln();
-    }
-    let ratio = (log_ratio / JUDGED_LIGHTS.len() as f64).exp();
+    let ratio = common::judged_ratio(&sponge, &another, [&own, &shared], ["own", "shared"]);
     println!("own over shared: {ratio:.3}");
     assert!(ratio < 0.95, "own over shared {ratio:.3}");
 }
@@ -554,6 +525,12 @@ fn every_light_keeps_its_measured_band_spreads() {
         }
         MaterialModel::new(parts).unwrap()
     };
+    let ratio = common::judged_ratio(&leather, &another, [&spread, &plain], ["with", "without"]);
+    // Mean |log| of each band's spread over the measured, over the nine lights.
+    let bands = |image: &Array3<f32>| {
+        let [l, _, _] = ColourSpace::Lab.planes(image);
+        detail_spreads(&l, LIGHTNESS_BANDS)
+    };
     let o = SynthesisOptions {
         rows: side as usize,
         cols: side as usize,
@@ -561,36 +538,21 @@ fn every_light_keeps_its_measured_band_spreads() {
         tileable: false,
     };
     let view = *leather.views().get(0).unwrap();
-    let bands = |image: &Array3<f32>| {
-        let [l, _, _] = ColourSpace::Lab.planes(image);
-        detail_spreads(&l, LIGHTNESS_BANDS)
-    };
-    let (mut log_ratio, mut band_error) = (0.0, [0.0; 2]);
-    for (theta, phi) in JUDGED_LIGHTS {
-        let light = Direction::new(theta, phi);
-        let l = leather.lights().find(&light, 0.5).unwrap();
-        let measured = leather.image(0, l).unwrap();
-        let y = Yardstick::from_samples(&measured, &another.image(0, l).unwrap(), None, 1).unwrap();
-        let want = bands(&measured);
-        let mut judged = [0.0; 2];
-        for (i, m) in [&spread, &plain].into_iter().enumerate() {
-            let image = m.synthesize_image(&view, &light, &o).unwrap();
-            judged[i] = y.judge(&image).unwrap().structure_vs_crop;
-            // Mean |log| of each band's spread over the measured.
-            band_error[i] += bands(&image)
+    let band_error = [&spread, &plain].map(|m| {
+        let mut error = 0.0;
+        for (theta, phi) in JUDGED_LIGHTS {
+            let light = Direction::new(theta, phi);
+            let l = leather.lights().find(&light, 0.5).unwrap();
+            let want = bands(&leather.image(0, l).unwrap());
+            let have = bands(&m.synthesize_image(&view, &light, &o).unwrap());
+            error += have
                 .iter()
                 .zip(&want)
                 .map(|(h, w)| (h / w).ln().abs())
-                .sum::<f64>()
-                / (LIGHTNESS_BANDS * JUDGED_LIGHTS.len()) as f64;
+                .sum::<f64>();
         }
-        println!(
-            "leather light {theta}/{phi}: with spreads x{:.2}, without x{:.2} the crop level",
-            judged[0], judged[1]
-        );
-        log_ratio += (judged[0] / judged[1]).ln();
-    }
-    let ratio = (log_ratio / JUDGED_LIGHTS.len() as f64).exp();
+        error / (LIGHTNESS_BANDS * JUDGED_LIGHTS.len()) as f64
+    });
     println!(
         "with over without: {ratio:.3}; band spreads off by {:.3} with, {:.3} without (mean |log|)",
         band_error[0], band_error[1]

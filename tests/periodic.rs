@@ -5,11 +5,13 @@
 
 use std::path::Path;
 
+mod common;
+
 use btfmrf::analysis::{AnalysisOptions, analyze};
 use btfmrf::btf::synthetic::SyntheticMaterial;
 use btfmrf::btf::{Btf, Direction};
 use btfmrf::eval::artefacts::seam;
-use btfmrf::eval::{JUDGED_LIGHTS, Yardstick, correlation};
+use btfmrf::eval::correlation;
 use btfmrf::geometry::lattice::{self, Lattice};
 use btfmrf::model::{MaterialModel, ModelKind, format};
 use btfmrf::progress::NoProgress;
@@ -270,33 +272,7 @@ fn every_light_brings_its_own_period() {
     let weights = own.periodic().and_then(|p| p.light_weights.as_ref());
     assert_eq!(weights.map(|w| w.weights.len()), Some(knit.lights().len()));
     assert!(shared.periodic().is_some_and(|p| p.light_weights.is_none()));
-    let o = SynthesisOptions {
-        rows: side as usize,
-        cols: side as usize,
-        seed: 1,
-        tileable: false,
-    };
-    let view = *knit.views().get(0).unwrap();
-    let mut log_ratio = 0.0;
-    for (theta, phi) in JUDGED_LIGHTS {
-        let light = Direction::new(theta, phi);
-        let l = knit.lights().find(&light, 0.5).unwrap();
-        let y = Yardstick::from_samples(
-            &knit.image(0, l).unwrap(),
-            &another.image(0, l).unwrap(),
-            None,
-            1,
-        )
-        .unwrap();
-        let [a, b] = [&own, &shared].map(|m| {
-            y.judge(&m.synthesize_image(&view, &light, &o).unwrap())
-                .unwrap()
-                .structure_vs_crop
-        });
-        println!("knit light {theta}/{phi}: own x{a:.2}, shared x{b:.2} the crop level");
-        log_ratio += (a / b).ln();
-    }
-    let ratio = (log_ratio / JUDGED_LIGHTS.len() as f64).exp();
+    let ratio = common::judged_ratio(&knit, &another, [&own, &shared], ["own", "shared"]);
     println!("own over shared: {ratio:.3}");
     assert!(ratio < 0.97, "own over shared {ratio:.3}");
 }

@@ -82,3 +82,47 @@ pub fn rti(set: &str) -> String {
         .expect("utf-8 path")
         .to_string()
 }
+
+/// Over the judge's nine frontal lights, the geometric mean of model `a`'s structure over
+/// model `b`'s, each x the another-crop level of `measured` (the other crop from `another`, the
+/// same material generated with another seed); both synthesized at the measured size, seed 1.
+/// Prints each light's two figures under `names`.
+pub fn judged_ratio(
+    measured: &Btf,
+    another: &Btf,
+    [a, b]: [&btfmrf::model::MaterialModel; 2],
+    names: [&str; 2],
+) -> f64 {
+    use btfmrf::btf::Direction;
+    use btfmrf::eval::{JUDGED_LIGHTS, Yardstick};
+    let o = btfmrf::synthesis::SynthesisOptions {
+        rows: measured.height() as usize,
+        cols: measured.width() as usize,
+        seed: 1,
+        tileable: false,
+    };
+    let view = *measured.views().get(0).unwrap();
+    let mut log_ratio = 0.0;
+    for (theta, phi) in JUDGED_LIGHTS {
+        let light = Direction::new(theta, phi);
+        let l = measured.lights().find(&light, 0.5).unwrap();
+        let y = Yardstick::from_samples(
+            &measured.image(0, l).unwrap(),
+            &another.image(0, l).unwrap(),
+            None,
+            1,
+        )
+        .unwrap();
+        let [x, z] = [a, b].map(|m| {
+            y.judge(&m.synthesize_image(&view, &light, &o).unwrap())
+                .unwrap()
+                .structure_vs_crop
+        });
+        println!(
+            "light {theta}/{phi}: {} x{x:.2}, {} x{z:.2} the crop level",
+            names[0], names[1]
+        );
+        log_ratio += (x / z).ln();
+    }
+    (log_ratio / JUDGED_LIGHTS.len() as f64).exp()
+}
