@@ -454,8 +454,8 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
             // the subspaces' deviations; the lights do not shape them. Measured (knit, 128^2,
             // x the another-crop level, mean over seeds): without the lights'
             // periods x4.13 at the nine measured lights (seeds 1-4) and x3.98 halfway between
-            // them (seeds 1-4); with them, each counted like a subspace image, x3.97 and
-            // x4.24 (seeds 1-2); not counted, x3.95 and x3.91.
+            // them (seeds 1-4); with them, each counted like a subspace image, x3.97 (seeds
+            // 1-4) and x4.24 (seeds 1-2); not counted, x3.95 and x3.91 (seeds 1-4).
             let light_periods = match &registered {
                 Some(_) if options.light_weights => (0..btf.lights().len())
                     .into_par_iter()
