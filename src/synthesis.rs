@@ -1108,8 +1108,8 @@ fn respread_lightness(
         Border::Periodic => exact_levels(rows, cols, LIGHTNESS_BANDS + 1),
         Border::Mirror => LIGHTNESS_BANDS + 1,
     };
-    let lightness = crate::geometry::relight::luminance(image)
-        .mapv(|y| f64::from(crate::color::lightness(y as f32)));
+    let lightness = ndarray::Zip::from(&crate::geometry::relight::luminance(image))
+        .par_map_collect(|&y| f64::from(crate::color::lightness(y as f32)));
     let mut pyramid = Pyramid::decompose_with(&lightness, levels, border);
     let details = pyramid.bands.len() - 1;
     for (band, &want) in pyramid.bands[..details].iter_mut().zip(wanted).skip(finest) {
