@@ -7,7 +7,9 @@
 //! under a directional light. The output is defined on the torus, so it tiles exactly; every
 //! join (including the wrap-around) is a cut through an overlap where the two patches agree,
 //! and the heights are integrated from the patches' differences (a Poisson solve on the
-//! torus), so what a cut cannot hide is spread smoothly instead of left as a step.
+//! torus), so what a cut cannot hide is spread smoothly instead of left as a step. A
+//! candidate patch is held back by how often its samples were laid already, so that no smooth
+//! stretch of the source (the least misfit against any smooth neighbour) repeats on a grid.
 
 use ndarray::{Array2, Zip};
 use rand::{RngExt, SeedableRng};
@@ -32,6 +34,16 @@ const CANDIDATES_PER_AXIS: usize = 48;
 const COARSE_STRIDE: usize = 4;
 /// ... and this many of the best are scored on all of them.
 const SHORTLIST: usize = 64;
+
+/// How strongly a candidate is held back for the source samples the quilt has copied already
+/// ([`Usage`]): its misfit is multiplied by `1 + REPEAT_WEIGHT * used / fair`, `used` the
+/// mean number of copies of its samples so far and `fair` that of all source samples.
+/// Without it, a smooth stretch of a source (whose misfit is least against any neighbour)
+/// was laid again and again: 40 of 256 patches of a 512^2 clay-leaf relief came from one
+/// small region, repeating one vein fragment on a grid, and the brick photograph's bricks
+/// grew long for want of the joints the smooth patches lack. Weights of 0.5, 1, 2 and 4 were
+/// judged (docs/BENCHMARKS.md); 2 did best over the built-in materials and the photographs.
+const REPEAT_WEIGHT: f64 = 2.0;
 
 /// The weight of the matched companions together in a patch's misfit, the relief's being 1
 /// (each over its variance). Looked at on the built-in stones (256^2): at 1 fewer stones are
@@ -377,6 +389,7 @@ fn quilt_patches<D: Differences>(
         Layout::new(cols, patch.min(sc), overlap),
     );
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let mut usage = Usage::new(sr, sc);
     let mut out = Array2::<f64>::zeros((rows, cols));
     let mut filled = Array2::<bool>::from_elem((rows, cols), false);
     let mut label = Array2::<u32>::zeros((rows, cols));
@@ -409,7 +422,7 @@ fn quilt_patches<D: Differences>(
                     let start = layout.starts[k] as f64 - layout.overlap as f64;
                     candidate_offsets(side, len, phase.map(|p| (start, p, axis)))
                 });
-            let (y0, x0, lift) = choose(&guide, (hr, hc), &offsets, &known, &mut rng);
+            let (y0, x0, lift) = choose(&guide, (hr, hc), &offsets, &known, &usage, &mut rng);
             let (source_rows, source_cols) = (wrapped(y0, hr, sr), wrapped(x0, hc, sc));
             let from = |y: usize, x: usize| (source_rows[y], source_cols[x]);
             let src = |y: usize, x: usize| source[from(y, x)] + lift;
@@ -435,6 +448,7 @@ fn quilt_patches<D: Differences>(
                 filled[p] = true;
                 label[p] = id;
             }
+            usage.laid((y0, x0), &taken);
             differences.record(&taken, at, src);
         }
     }
@@ -658,7 +672,8 @@ fn around(chosen: usize, axis: &AxisOffsets) -> std::ops::Range<usize> {
 
 /// The source offset of the next patch and the height it is lifted by: uniformly among the
 /// candidates whose squared error against the `known` output samples, after the best lift
-/// (the mean difference), is within [`TOLERANCE`] of the best. Lifting lets patches from
+/// (the mean difference) and times the candidate's repetition factor (`usage`, see
+/// [`REPEAT_WEIGHT`]), is within [`TOLERANCE`] of the best. Lifting lets patches from
 /// different heights meet without a step. Offsets beyond the source wrap around it (only for
 /// sources smaller than a patch). Every candidate is first scored on the known samples of
 /// every [`COARSE_STRIDE`]-th patch row; the [`SHORTLIST`] best are scored on all of them.
@@ -674,6 +689,7 @@ fn choose(
     (hr, hc): (usize, usize),
     [ys, xs]: &[AxisOffsets; 2],
     known: &Known,
+    usage: &Usage,
     rng: &mut Xoshiro256PlusPlus,
 ) -> (usize, usize, f64) {
     let (sr, sc) = guide.relief.dim();
@@ -691,23 +707,102 @@ fn choose(
     // A thin band on rows the stride skips (tiny patches) is scored on all of it.
     let rough_known = if coarse.at.is_empty() { known } else { &coarse };
     let rough = guide.misfits(&candidates, rough_known, fits_inside);
-    let misfits: Vec<f64> = rough.iter().map(|m| m.0).collect();
-    let shortlist: Vec<(usize, usize)> = least(&misfits, SHORTLIST)
+    let repeats = usage.factors(&candidates, (hr, hc), fits_inside);
+    let misfits: Vec<f64> = rough.iter().zip(&repeats).map(|(m, r)| m.0 * r).collect();
+    let (shortlist, repeats): (Vec<(usize, usize)>, Vec<f64>) = least(&misfits, SHORTLIST)
         .into_iter()
-        .map(|k| candidates[k])
-        .collect();
+        .map(|k| (candidates[k], repeats[k]))
+        .unzip();
     let scored = guide.misfits(&shortlist, known, fits_inside);
-    let best = scored.iter().map(|s| s.0).fold(f64::INFINITY, f64::min);
+    let held: Vec<f64> = scored.iter().zip(&repeats).map(|(s, r)| s.0 * r).collect();
+    let best = held.iter().copied().fold(f64::INFINITY, f64::min);
     let limit = best * TOLERANCE + 1e-12;
-    let good: Vec<usize> = (0..scored.len())
-        .filter(|&k| scored[k].0 <= limit)
-        .collect();
+    let good: Vec<usize> = (0..held.len()).filter(|&k| held[k] <= limit).collect();
     let pick = good[rng.random_range(0..good.len())];
     let (y, x) = shortlist[pick];
     if ys.refine == 0 && xs.refine == 0 {
         return (y, x, scored[pick].1);
     }
     refine(guide, (y, x), [ys, xs], known, fits_inside)
+}
+
+/// How often the quilt has copied each source sample so far, as sums over rectangles: what
+/// holds back a candidate whose samples were laid more than their share ([`REPEAT_WEIGHT`]).
+struct Usage {
+    /// `table[(y, x)]`: the copies of the source samples above row y and left of column x,
+    /// (source rows + 1) x (source columns + 1).
+    table: Array2<f64>,
+    /// All copies.
+    total: f64,
+}
+
+impl Usage {
+    fn new(rows: usize, cols: usize) -> Self {
+        Self {
+            table: Array2::zeros((rows + 1, cols + 1)),
+            total: 0.0,
+        }
+    }
+
+    /// Counts the samples a patch at source corner `(y0, x0)` laid (`taken`, the patch's
+    /// shape). A patch that wraps around the source is not counted: every candidate then
+    /// wraps, and [`Usage::factors`] holds none back.
+    fn laid(&mut self, (y0, x0): (usize, usize), taken: &Array2<bool>) {
+        let (hr, hc) = taken.dim();
+        let (rows, cols) = (self.table.nrows() - 1, self.table.ncols() - 1);
+        if y0 + hr > rows || x0 + hc > cols {
+            return;
+        }
+        // The patch's own rectangle sums: `local[(y, x)]` counts its taken samples above
+        // patch row y and left of patch column x.
+        let mut local = Array2::<f64>::zeros((hr + 1, hc + 1));
+        for y in 0..hr {
+            let mut row = 0.0;
+            for x in 0..hc {
+                row += f64::from(u8::from(taken[(y, x)]));
+                local[(y + 1, x + 1)] = local[(y, x + 1)] + row;
+            }
+        }
+        self.total += local[(hr, hc)];
+        // Every entry below and right of the corner gains the taken samples above and left of
+        // it: the patch's sums, held at its last row and column beyond them.
+        for y in y0 + 1..=rows {
+            let from = local.row((y - y0).min(hr));
+            let mut to = self.table.row_mut(y);
+            let (inside, beyond) =
+                to.as_slice_mut().expect("a row of a standard array")[x0 + 1..].split_at_mut(hc);
+            for (t, l) in inside.iter_mut().zip(from.iter().skip(1)) {
+                *t += l;
+            }
+            let whole = from[hc];
+            beyond.iter_mut().for_each(|t| *t += whole);
+        }
+    }
+
+    /// Per candidate corner, the factor its misfit is multiplied by: `1 + REPEAT_WEIGHT *
+    /// used / fair` over the `hr` x `hc` samples it would copy; 1 for every candidate before
+    /// the first copy or when patches wrap around the source (they then cover all of it).
+    fn factors(
+        &self,
+        candidates: &[(usize, usize)],
+        (hr, hc): (usize, usize),
+        inside: bool,
+    ) -> Vec<f64> {
+        let samples = (self.table.nrows() - 1) * (self.table.ncols() - 1);
+        let fair = self.total / samples.max(1) as f64;
+        if !inside || fair <= 0.0 {
+            return vec![1.0; candidates.len()];
+        }
+        let t = &self.table;
+        let area = (hr * hc) as f64;
+        candidates
+            .iter()
+            .map(|&(y, x)| {
+                let used = t[(y + hr, x + hc)] - t[(y, x + hc)] - t[(y + hr, x)] + t[(y, x)];
+                1.0 + REPEAT_WEIGHT * used / area / fair
+            })
+            .collect()
+    }
 }
 
 /// The indices of the `n` least `values`, in order, equals by index: a stable sort's first
@@ -1637,6 +1732,91 @@ mod tests {
             assert!((mq - ms).abs() < 0.25 * ss, "mean {mq} vs {ms}");
             assert!((sq / ss - 1.0).abs() < 0.25, "std {sq} vs {ss}");
         }
+    }
+
+    #[test]
+    fn usage_sums_match_the_copies_counted_one_by_one() {
+        let (rows, cols) = (23, 31);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(4);
+        let mut usage = Usage::new(rows, cols);
+        let mut copies = Array2::<f64>::zeros((rows, cols));
+        for _ in 0..40 {
+            let (hr, hc) = (rng.random_range(1..12), rng.random_range(1..12));
+            let (y0, x0) = (rng.random_range(0..rows), rng.random_range(0..cols));
+            let taken = Array2::from_shape_fn((hr, hc), |_| rng.random_range(0..4) > 0);
+            usage.laid((y0, x0), &taken);
+            if y0 + hr <= rows && x0 + hc <= cols {
+                for ((y, x), _) in taken.indexed_iter().filter(|(_, t)| **t) {
+                    copies[(y0 + y, x0 + x)] += 1.0;
+                }
+            }
+        }
+        assert_eq!(usage.total, copies.sum());
+        for y in 0..=rows {
+            for x in 0..=cols {
+                let naive = copies.slice(ndarray::s![..y, ..x]).sum();
+                assert_eq!(usage.table[(y, x)], naive, "({y}, {x})");
+            }
+        }
+    }
+
+    #[test]
+    fn a_smooth_stretch_of_the_source_is_not_laid_again_and_again() {
+        // Ridges over noise, with one flat square: a patch from the square fits any flat
+        // neighbour best, so a quilt that only minimises misfit keeps laying it.
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(8);
+        let mut source = ridges(96, 96, 9);
+        source.mapv_inplace(|v| v + rng.random_range(-0.3..0.3));
+        let flat = |y: usize, x: usize| (8..48).contains(&y) && (40..80).contains(&x);
+        for ((y, x), v) in source.indexed_iter_mut() {
+            if flat(y, x) {
+                *v = 1.0;
+            }
+        }
+        let placement = quilt_placement(&source, &[], &[], (384, 384), 2, None);
+        let mut copies = Array2::<f64>::zeros(source.dim());
+        for &i in &placement.from {
+            copies[(i as usize / 96, i as usize % 96)] += 1.0;
+        }
+        // What patches at uniformly random offsets would copy: a source sample lies in as
+        // many patches as there are offsets whose patch covers it.
+        let patch = patch_side(96, 96);
+        let covering = |y: usize| {
+            (0..=96 - patch)
+                .filter(|o| (*o..o + patch).contains(&y))
+                .count()
+        };
+        let random =
+            Array2::from_shape_fn(source.dim(), |(y, x)| (covering(y) * covering(x)) as f64);
+        // The share of the output copied from the flat square, and the most copies of any one
+        // source sample over their mean, each against what the random patches give.
+        let from_flat = |copies: &Array2<f64>| {
+            copies
+                .indexed_iter()
+                .filter(|((y, x), _)| flat(*y, *x))
+                .map(|(_, c)| c)
+                .sum::<f64>()
+                / copies.sum()
+        };
+        let most = |copies: &Array2<f64>| {
+            copies.iter().copied().fold(0.0, f64::max) / copies.mean().unwrap()
+        };
+        let (flat_share, random_share) = (from_flat(&copies), from_flat(&random));
+        let (most_copies, random_most) = (most(&copies), most(&random));
+        println!(
+            "from the flat square {flat_share:.3} (random patches {random_share:.3}); \
+             most copies x{most_copies:.1} (random x{random_most:.1})"
+        );
+        // Before the repetition penalty: 0.525 (x1.95 the random patches' 0.269) and x5.8
+        // (x2.6 their x2.2); with it, 0.297 and x2.8.
+        assert!(
+            flat_share < 1.5 * random_share,
+            "{flat_share:.3} of the output"
+        );
+        assert!(
+            most_copies < 2.0 * random_most,
+            "a source sample copied x{most_copies:.1}"
+        );
     }
 
     #[test]
