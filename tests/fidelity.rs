@@ -443,36 +443,13 @@ fn a_capture_larger_than_the_window_keeps_its_structures_whole_with_its_relief()
     let small = model(Some(64), None);
     assert!(small.range_map().expect("a range map").step > 1);
     assert!(small.exemplar().is_none());
-    let o = SynthesisOptions {
-        rows: 2 * side as usize,
-        cols: 2 * side as usize,
-        seed: 1,
-        tileable: false,
-    };
-    let view = *stones.views().get(0).unwrap();
-    let mut log_ratio = 0.0;
-    let lights = JUDGED_LIGHTS;
-    for (theta, phi) in lights {
-        let light = Direction::new(theta, phi);
-        let l = stones.lights().find(&light, 0.5).unwrap();
-        let y = Yardstick::from_samples(
-            &stones.image(0, l).unwrap(),
-            &another.image(0, l).unwrap(),
-            None,
-            1,
-        )
-        .unwrap();
-        let [c, w] = [&chosen, &window].map(|m| {
-            y.judge(&m.synthesize_image(&view, &light, &o).unwrap())
-                .unwrap()
-                .structure_vs_crop
-        });
-        println!(
-            "stones {side}^2 light {theta}/{phi}: whole x{c:.2}, window x{w:.2} the crop level"
-        );
-        log_ratio += (c / w).ln();
-    }
-    let ratio = (log_ratio / lights.len() as f64).exp();
+    let ratio = common::judged_ratio(
+        &stones,
+        &another,
+        [&chosen, &window],
+        ["whole", "window"],
+        2,
+    );
     println!("whole over window: {ratio:.3}");
     assert!(ratio < 0.85, "whole over window {ratio:.3}");
 }
@@ -500,7 +477,7 @@ fn every_light_brings_its_own_exemplar_detail() {
         Some(sponge.lights().len())
     );
     assert!(shared.exemplar().is_some_and(|e| e.light_weights.is_none()));
-    let ratio = common::judged_ratio(&sponge, &another, [&own, &shared], ["own", "shared"]);
+    let ratio = common::judged_ratio(&sponge, &another, [&own, &shared], ["own", "shared"], 1);
     println!("own over shared: {ratio:.3}");
     assert!(ratio < 0.95, "own over shared {ratio:.3}");
 }
@@ -532,7 +509,13 @@ fn every_light_keeps_its_measured_band_spreads() {
         }
         MaterialModel::new(parts).unwrap()
     };
-    let ratio = common::judged_ratio(&leather, &another, [&spread, &plain], ["with", "without"]);
+    let ratio = common::judged_ratio(
+        &leather,
+        &another,
+        [&spread, &plain],
+        ["with", "without"],
+        1,
+    );
     // Mean |log| of each band's spread over the measured, over the nine lights.
     let bands = |image: &Array3<f32>| {
         let [l, _, _] = ColourSpace::Lab.planes(image);

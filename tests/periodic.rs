@@ -272,7 +272,7 @@ fn every_light_brings_its_own_period() {
     let weights = own.periodic().and_then(|p| p.light_weights.as_ref());
     assert_eq!(weights.map(|w| w.weights.len()), Some(knit.lights().len()));
     assert!(shared.periodic().is_some_and(|p| p.light_weights.is_none()));
-    let ratio = common::judged_ratio(&knit, &another, [&own, &shared], ["own", "shared"]);
+    let ratio = common::judged_ratio(&knit, &another, [&own, &shared], ["own", "shared"], 1);
     println!("own over shared: {ratio:.3}");
     assert!(ratio < 0.97, "own over shared {ratio:.3}");
 }

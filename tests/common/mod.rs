@@ -85,19 +85,20 @@ pub fn rti(set: &str) -> String {
 
 /// Over the judge's nine frontal lights, the geometric mean of model `a`'s structure over
 /// model `b`'s, each x the another-crop level of `measured` (the other crop from `another`, the
-/// same material generated with another seed); both synthesized at the measured size, seed 1.
-/// Prints each light's two figures under `names`.
+/// same material generated with another seed); both synthesized at `enlarge` times the
+/// measured side, seed 1. Prints each light's two figures under `names`.
 pub fn judged_ratio(
     measured: &Btf,
     another: &Btf,
     [a, b]: [&btfmrf::model::MaterialModel; 2],
     names: [&str; 2],
+    enlarge: usize,
 ) -> f64 {
     use btfmrf::btf::Direction;
     use btfmrf::eval::{JUDGED_LIGHTS, Yardstick};
     let o = btfmrf::synthesis::SynthesisOptions {
-        rows: measured.height() as usize,
-        cols: measured.width() as usize,
+        rows: enlarge * measured.height() as usize,
+        cols: enlarge * measured.width() as usize,
         seed: 1,
         tileable: false,
     };
