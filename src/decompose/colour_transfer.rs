@@ -210,6 +210,11 @@ fn coupling_of(planes: &[Array2<f64>; 3]) -> Coupling {
     let [first, a, b] = planes
         .each_ref()
         .map(|p| p.iter().copied().collect::<Vec<f64>>());
+    coupling_of_values([&first, &a, &b])
+}
+
+/// The [`Coupling`] of colours given as one slice per coordinate (of one length).
+fn coupling_of_values([first, a, b]: [&[f64]; 3]) -> Coupling {
     let n = first.len();
     let mut coupling = [[0.0; 2]; LIGHTNESS_BINS];
     if n < LIGHTNESS_BINS {
@@ -218,7 +223,7 @@ fn coupling_of(planes: &[Array2<f64>; 3]) -> Coupling {
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&i, &j| first[i].total_cmp(&first[j]));
     let mean = |v: &[f64]| v.iter().sum::<f64>() / n as f64;
-    let (ma, mb) = (mean(&a), mean(&b));
+    let (ma, mb) = (mean(a), mean(b));
     for (k, bin) in coupling.iter_mut().enumerate() {
         let run = &order[k * n / LIGHTNESS_BINS..(k + 1) * n / LIGHTNESS_BINS];
         let len = run.len() as f64;
@@ -255,19 +260,28 @@ impl ColourMarginals {
         }
     }
 
-    /// Shifts the second and third coordinates of `planes` by the coupling at each pixel's
-    /// lightness quantile (in the measured first table): independently synthesized factors
-    /// regain the measured chroma of their lightness. Nothing without a coupling.
+    /// Shifts the second and third coordinates of `planes` by what their own coupling lacks of
+    /// the measured one at each pixel's lightness quantile (in the measured first table):
+    /// independently synthesized factors (no coupling of their own) regain the measured chroma
+    /// of their lightness, and chroma laid from the measured images with their L* (an
+    /// exemplar's), already coupled, is not shifted a second time. Shifted in full, a beige
+    /// stone's shaded half took the grey stones' chroma: grey blotches inside the built-in
+    /// stones. The planes' own coupling is taken from the regular subsample the marginal maps
+    /// use. Nothing without a coupling.
     fn couple(&self, planes: &mut [Array2<f64>; 3]) {
-        let Some(coupling) = &self.coupling else {
+        let Some(measured) = &self.coupling else {
             return;
         };
         let [first, a, b] = planes;
+        let stride = marginals::sample_step(first.len(), first.ncols());
+        let subsample = |p: &Array2<f64>| p.iter().step_by(stride).copied().collect::<Vec<f64>>();
+        let own = coupling_of_values([&subsample(first), &subsample(a), &subsample(b)]);
         let rank = MarginalMap::between(self.tables[0].clone(), &band_probabilities(), first.len());
         Zip::from(&*first).and(a).and(b).par_for_each(|&l, a, b| {
-            let [da, db] = coupling_at(coupling, rank.apply(l));
-            *a += da;
-            *b += db;
+            let u = rank.apply(l);
+            let ([ma, mb], [oa, ob]) = (coupling_at(measured, u), coupling_at(&own, u));
+            *a += ma - oa;
+            *b += mb - ob;
         });
     }
 
@@ -621,6 +635,60 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Blocks of two materials (a beige: L* about 62, a* 4, b* 14; a grey: L* about 50, a* 0,
+    /// b* -2) in a checkerboard of `side`-pixel squares, each shaded by a ramp of +-8 L* across
+    /// it, so the two materials' L* overlap as a shaded stone's and a lit one's do.
+    fn shaded_blocks(n: usize, side: usize) -> [Array2<f64>; 3] {
+        let beige = |y: usize, x: usize| (y / side + x / side).is_multiple_of(2);
+        let ramp = |y: usize, x: usize| {
+            16.0 * ((x % side + y % side) as f64 / (2 * side - 2) as f64 - 0.5)
+        };
+        let pick = |[b, g]: [f64; 2]| {
+            Array2::from_shape_fn((n, n), move |(y, x)| if beige(y, x) { b } else { g })
+        };
+        let l = &pick([62.0, 50.0]) + &Array2::from_shape_fn((n, n), |(y, x)| ramp(y, x));
+        [l, pick([4.0, 0.0]), pick([14.0, -2.0])]
+    }
+
+    #[test]
+    fn laid_colours_keep_each_block_one_colour() {
+        // The measured colours laid again (a quilt copies measured pixels with their L*): their
+        // chroma already follows L* as measured, so the transfer must not push a shaded beige
+        // block towards the grey's chroma. Shifting by the whole measured coupling did: grey
+        // blotches inside the built-in stones.
+        let (n, side) = (64, 16);
+        let measured = shaded_blocks(n, side);
+        let marginals = ColourMarginals::measure(&measured);
+        // Laid elsewhere: the same blocks, moved by half a block.
+        let laid = measured.clone().map(|p| {
+            Array2::from_shape_fn((n, n), |(y, x)| p[((y + side / 2) % n, (x + side / 2) % n)])
+        });
+        let mut synth = laid.clone();
+        marginals.transfer(&mut synth, Border::Periodic);
+        // The widest a* or b* range inside one block as laid (the grid moved by half a block).
+        let spread_in_block = |p: &[Array2<f64>; 3]| {
+            let corners = (0..n / side).flat_map(|by| (0..n / side).map(move |bx| (by, bx)));
+            let range = |plane: &Array2<f64>, (by, bx): (usize, usize)| {
+                let values = (0..side * side).map(|i| {
+                    let (y, x) = (by * side + i / side, bx * side + i % side);
+                    plane[((y + n - side / 2) % n, (x + n - side / 2) % n)]
+                });
+                let (lo, hi) =
+                    values.fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+                hi - lo
+            };
+            corners
+                .flat_map(|c| [range(&p[1], c), range(&p[2], c)])
+                .fold(0.0f64, f64::max)
+        };
+        assert!(
+            spread_in_block(&laid) < 1e-9,
+            "the laid blocks are one colour each"
+        );
+        let after = spread_in_block(&synth);
+        assert!(after < 1.0, "a* or b* varies by {after} inside one block");
     }
 
     #[test]
