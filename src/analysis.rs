@@ -112,11 +112,16 @@ pub struct AnalysisOptions {
 }
 
 /// The default largest side of the structure exemplar for `subspaces` subspace images,
-/// pixels: a photograph's one crop fills the exemplar's byte budget at 256 x 256; several
-/// subspace images share it as the mean and up to three deviations of 128 x 128 crops.
+/// pixels: a photograph's one crop is 320 x 320; several subspace images share the exemplar's
+/// byte budget as the mean and up to three deviations of 128 x 128 crops.
 /// Measured on the three photographs in `../shared/data/textures` (2D CAR, 512^2, structure
 /// over the another-crop level): 128 -> 256 took grass x1.44 -> x0.75 and gravel x1.59 ->
 /// x1.13 (a small crop's few stones and clover leaves repeat visibly), brick x0.68 -> x0.82.
+/// Enlarged to 1024^2 (seeds 1-4, structure distance), 256 -> 320 took brick 0.118-0.138 ->
+/// 0.115-0.123, grass 0.050-0.052 -> 0.045-0.047 and gravel 0.046-0.047 -> 0.041-0.042, the
+/// models 46-68 KB -> 65-99 KB (docs/BENCHMARKS.md); 360 gained a little more (brick
+/// 0.109-0.120) at 81-125 KB, and a model that deflate cannot shrink could then pass the
+/// 150 KB budget.
 /// Sides in between (the budget shared by two or three crops) are not used: at 147 the
 /// tileable synthesis of canvas-handheld (3 subspace images) showed top-bottom seams up to
 /// 4.3 standard deviations of the interior's neighbour correlations, at 128 at most 1.7.
@@ -128,8 +133,10 @@ pub fn exemplar_side_for(subspaces: usize) -> usize {
     }
 }
 
-/// The exemplar side for one subspace image (a photograph): a 64 KiB crop.
-pub const PHOTOGRAPH_EXEMPLAR_SIDE: usize = 256;
+/// The exemplar side for one subspace image (a photograph): a 100 KiB crop, and 3 KiB of
+/// chroma at 8 x 8 blocks; with the MRF and the tables about 110 KB before the file's deflate,
+/// inside [`MODEL_BUDGET`] whatever the photograph.
+pub const PHOTOGRAPH_EXEMPLAR_SIDE: usize = 320;
 /// The exemplar side for several subspace images: crops of 16 KiB, the mean and up to three
 /// deviations in the budget.
 pub const EXEMPLAR_SIDE: usize = 128;
@@ -1319,10 +1326,10 @@ const EXEMPLAR_RESIDUAL: f64 = 0.05;
 const EXEMPLAR_BUDGET: usize = 64 << 10;
 
 /// Bytes the exemplar's chroma may take: a 128 x 128 crop's mean a* and b* at 2 x 2 blocks,
-/// a photograph's 256 x 256 crop's at 4 x 4. The texture judge reads L* only; measured on its
-/// colour distance (sponge, stones, leather, knit at 128^2, 20 clusters, 9 lights, with
-/// three L* deviations), a deviation more (16 KiB) or 4 x 4 blocks (4 KiB) changed no figure
-/// by more than 0.01 Lab.
+/// a 256 x 256 crop's at 4 x 4, a photograph's 320 x 320 crop's at 8 x 8. The texture judge
+/// reads L* only; measured on its colour distance (sponge, stones, leather, knit at 128^2, 20
+/// clusters, 9 lights, with three L* deviations), a deviation more (16 KiB) or 4 x 4 blocks
+/// (4 KiB) changed no figure by more than 0.01 Lab.
 const CHROMA_BUDGET: usize = 8 << 10;
 
 /// The smallest power-of-two block side (at least 2: chroma needs less resolution than
