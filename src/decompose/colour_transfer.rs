@@ -235,6 +235,13 @@ fn coupling_of_values([first, a, b]: [&[f64]; 3]) -> Coupling {
     coupling
 }
 
+/// The colours of `planes` at the regular subsample the marginal maps are measured on
+/// ([`marginals::sample_step`]), one vector per plane.
+fn regular_subsample(planes: &[Array2<f64>; 3]) -> [Vec<f64>; 3] {
+    let stride = marginals::sample_step(planes[0].len(), planes[0].ncols());
+    std::array::from_fn(|c| planes[c].iter().step_by(stride).copied().collect())
+}
+
 /// The coupling's shift at the lightness quantile `u` (0..1): linear between bin centres,
 /// constant beyond the outer ones.
 fn coupling_at(coupling: &Coupling, u: f64) -> [f64; 2] {
@@ -272,10 +279,9 @@ impl ColourMarginals {
         let Some(measured) = &self.coupling else {
             return;
         };
+        let [l, a, b] = regular_subsample(planes);
+        let own = coupling_of_values([&l, &a, &b]);
         let [first, a, b] = planes;
-        let stride = marginals::sample_step(first.len(), first.ncols());
-        let subsample = |p: &Array2<f64>| p.iter().step_by(stride).copied().collect::<Vec<f64>>();
-        let own = coupling_of_values([&subsample(first), &subsample(a), &subsample(b)]);
         let rank = MarginalMap::between(self.tables[0].clone(), &band_probabilities(), first.len());
         Zip::from(&*first).and(a).and(b).par_for_each(|&l, a, b| {
             let u = rank.apply(l);
@@ -320,10 +326,8 @@ impl ColourMarginals {
     /// traffic, the same values.
     fn slide(&self, planes: &mut [Array2<f64>; 3]) {
         let probabilities = band_probabilities();
-        let (len, cols) = (planes[0].len(), planes[0].ncols());
-        let stride = marginals::sample_step(len, cols);
-        let mut subsample: [Vec<f64>; 3] =
-            std::array::from_fn(|c| planes[c].iter().step_by(stride).copied().collect());
+        let len = planes[0].len();
+        let mut subsample = regular_subsample(planes);
         let mut steps = Vec::with_capacity(ROTATIONS);
         for r in (1..ROTATIONS).chain([0]) {
             let basis = rotation(r);
