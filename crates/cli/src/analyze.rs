@@ -174,10 +174,10 @@ pub struct Args {
     /// grains, stones, the shadows of a relief under each light). The coarser L* comes from
     /// the MRF, or from the laid crops themselves where a check finds them clearly closer to
     /// the measured images (see --coarse). The crops' a* and b* are stored too, averaged over
-    /// 2 x 2 pixels (4 x 4 for a 256 crop, 8 x 8 for 320; at most 8 KiB), and laid with the same
-    /// patches, so each stone or thread keeps its own colour. Default: 320 for a photograph
-    /// (one subspace image, one crop of 100 KiB; a larger crop gives the quilt more to choose
-    /// from: the three photographs' models take 65-99 KB),
+    /// 2 x 2 pixels (4 x 4 for a 256 crop, 8 x 8 for 320 or 360; at most 8 KiB), and laid with
+    /// the same patches, so each stone or thread keeps its own colour. Default: 360 for a
+    /// photograph (one subspace image, one crop of 127 KiB; a larger crop gives the quilt more
+    /// to choose from: the three photographs' models take 81-125 KB, at most about 135 KB),
     /// 128 for several subspace images (the mean, 16 KiB, and up to six deviations, 8 KiB
     /// each).
     /// Stored when there is no range map (a photograph), and beside a range map when a check
@@ -190,7 +190,8 @@ pub struct Args {
     /// measured images' centred crop of at most 256 x 256: a 256^2 built-in sponge (81 x 81
     /// images) took 21 s to analyse against 10 s with --exemplar 0, the 310^2 clay-leaf RTI
     /// capture 37 s (both layouts, see --relief-layout) against 2 s, on a 2-core machine. The quilt costs synthesis time: a 1024x1024 image of
-    /// a photograph's model took 0.52 s with it and 0.32 s without on a 2-core machine.
+    /// a photograph's model took 0.46 s with it and 0.21 s without on a 2-core machine (gravel,
+    /// medians of 11 calls).
     #[arg(long)]
     exemplar: Option<usize>,
     /// Do not look for a lattice. By default a material that repeats along both image axes (a
