@@ -729,9 +729,9 @@ fn around(chosen: usize, axis: &AxisOffsets) -> std::ops::Range<usize> {
 /// different heights meet without a step. Offsets beyond the source wrap around it (only for
 /// sources smaller than a patch). Every candidate is first scored on the known samples of
 /// every [`COARSE_STRIDE`]-th patch row (a grid of candidates by [`Guide::grid_misfits`]);
-/// the [`SHORTLIST`] best are scored on all of them. (Ranking on the relief alone and adding the matched companions only on the shortlist was
-/// up to 1.5x faster at 1024^2, but it left a tileable canvas synthesis a wrap-around seam at
-/// 3.3 standard deviations.)
+/// the [`SHORTLIST`] best are scored on all of them. (Ranking on the relief alone and adding
+/// the matched companions only on the shortlist was up to 1.5x faster at 1024^2, but it left
+/// a tileable canvas synthesis a wrap-around seam at 3.3 standard deviations.)
 ///
 /// The candidate picked is then moved to the best offset within the axes' `refine` of it,
 /// scored on every known sample: the spread steps several samples at a time, and a patch off
@@ -987,7 +987,8 @@ impl<'a> Guide<'a> {
     /// with the source summed with [`GRID_LANES`] neighbouring candidates side by side (one
     /// contiguous read per known sample, [`Strided`]), the source's own sums taken from
     /// running sums along its rows. The same misfits as [`Guide::misfits`] to single-precision
-    /// rounding, at about a third of the work.
+    /// rounding (a candidate at the shortlist's edge may change places), in about 0.7 of the
+    /// time (one photograph's 1024^2 quilt, single-threaded: 0.13 s against 0.18-0.19 s).
     fn grid_misfits(
         &self,
         ys: &[usize],
