@@ -1329,7 +1329,7 @@ const EXEMPLAR_RESIDUAL: f64 = 0.05;
 const EXEMPLAR_BUDGET: usize = 64 << 10;
 
 /// Bytes the exemplar's chroma may take: a 128 x 128 crop's mean a* and b* at 2 x 2 blocks,
-/// a 256 x 256 crop's at 4 x 4, a photograph's 320 x 320 crop's at 8 x 8. The texture judge
+/// a 256 x 256 crop's at 4 x 4, a photograph's 360 x 360 crop's at 8 x 8. The texture judge
 /// reads L* only; measured on its colour distance (sponge, stones, leather, knit at 128^2, 20
 /// clusters, 9 lights, with three L* deviations), a deviation more (16 KiB) or 4 x 4 blocks
 /// (4 KiB) changed no figure by more than 0.01 Lab.
