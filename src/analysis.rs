@@ -113,7 +113,7 @@ pub struct AnalysisOptions {
 
 /// The default largest side of the structure exemplar for `subspaces` subspace images,
 /// pixels: a photograph's one crop is 360 x 360; several subspace images share the exemplar's
-/// byte budget as the mean and up to three deviations of 128 x 128 crops.
+/// byte budget as the mean and up to six deviations of 128 x 128 crops.
 /// Measured on the three photographs in `../shared/data/textures` (2D CAR, 512^2, structure
 /// over the another-crop level): 128 -> 256 took grass x1.44 -> x0.75 and gravel x1.59 ->
 /// x1.13 (a small crop's few stones and clover leaves repeat visibly), brick x0.68 -> x0.82.
@@ -121,8 +121,9 @@ pub struct AnalysisOptions {
 /// 0.115-0.123, grass 0.050-0.052 -> 0.045-0.047 and gravel 0.046-0.047 -> 0.041-0.042, the
 /// models 46-68 KB -> 65-99 KB (docs/BENCHMARKS.md); 320 -> 360 took brick to 0.109-0.120
 /// (within 1.2x of the `texture-synthesis` peer's 0.1016 at every seed), grass to
-/// 0.044-0.047 and gravel to 0.040-0.041 at 81-125 KB, at the same synthesis time (the
-/// candidates scored per patch are capped, [`crate::geometry::quilt`]). A model of a
+/// 0.044-0.047 and gravel to 0.040-0.041 at 81-125 KB, for about 4 % more synthesis time (the
+/// candidates scored per patch are capped, [`crate::geometry::quilt`]; the usage sums grow
+/// with the crop). A model of a
 /// photograph that deflate cannot shrink (random noise) takes 134.6 KB at 360, 107.0 KB at
 /// 320, inside [`MODEL_BUDGET`] either way.
 /// Sides in between (the budget shared by two or three crops) are not used: at 147 the
@@ -140,7 +141,7 @@ pub fn exemplar_side_for(subspaces: usize) -> usize {
 /// chroma at 8 x 8 blocks; with the MRF and the tables at most about 135 KB, inside
 /// [`MODEL_BUDGET`] whatever the photograph.
 pub const PHOTOGRAPH_EXEMPLAR_SIDE: usize = 360;
-/// The exemplar side for several subspace images: crops of 16 KiB, the mean and up to three
+/// The exemplar side for several subspace images: crops of 16 KiB, the mean and up to six
 /// deviations in the budget.
 pub const EXEMPLAR_SIDE: usize = 128;
 /// The largest exemplar side accepted: its byte a pixel must stay well inside a model file's
