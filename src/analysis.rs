@@ -10,6 +10,7 @@ use rayon::prelude::*;
 
 use crate::btf::Btf;
 use crate::decompose::colour_transfer::ColourMarginals;
+use crate::decompose::kl::varies_less_than;
 use crate::decompose::marginals::{self, QuantileGrid, Quantiles};
 use crate::decompose::pyramid::{self, auto_levels};
 use crate::decompose::stationarity::{NON_STATIONARY_SHARE, block_mean_share};
@@ -1495,7 +1496,13 @@ fn exemplar_from(
         view: l.view,
         weights: format::as_stored_light_rows(&lightness.weights.split_off(crops.len())),
     });
-    let chroma = budget.chroma.map(|chroma_budget| {
+    // Chroma that varies by nothing visible (a grey photograph's) would lay no detail.
+    let visible = ColourSpace::Lab.visible_range();
+    let chroma_varies = crops
+        .iter()
+        .any(|[_, a, b]| !varies_less_than(a, visible) || !varies_less_than(b, visible));
+    let chroma_budget = budget.chroma.filter(|_| chroma_varies);
+    let chroma = chroma_budget.map(|chroma_budget| {
         let fields: Vec<Vec<f64>> = crops
             .iter()
             .map(|[_, a, b]| {
@@ -1809,7 +1816,7 @@ where
     } else {
         KlBasis::fit(image, options.colour_space)
     };
-    let factors = kl.forward(image);
+    let factors = kl.visible_factors(image);
     let colour_marginals = options
         .colour_matching
         .then(|| ColourMarginals::measure(&kl.space.planes(image)));

@@ -282,10 +282,14 @@ impl LevelsVisitor for SynthesizeBands<'_> {
             .map(|i| {
                 let (group, lv) = (i / n, i % n);
                 let (r, c) = self.shapes[lv];
+                let model = &levels.levels()[lv][group];
+                if let Some(means) = model.flat_means() {
+                    return Array3::from_shape_fn((M::PLANES, r, c), |(p, _, _)| means[p]);
+                }
                 let stream = noise_stream(M::PLANES, group * M::PLANES);
                 let len = M::noise_len(r, c, o.tileable);
                 let noise = self.noise.draw(band_seed(o.seed, stream, lv), len);
-                levels.levels()[lv][group].synthesize_from(r, c, &noise, o.tileable)
+                model.synthesize_from(r, c, &noise, o.tileable)
             })
             .collect();
         let mut planes: Vec<Vec<Array2<f64>>> = (0..3).map(|_| Vec::with_capacity(n)).collect();
@@ -459,7 +463,7 @@ impl MaterialModel {
                 });
         }
         if let Some(c) = &s.colour_marginals {
-            c.transfer(&mut colours, border);
+            c.transfer(&mut colours, border, s.kl.space);
         }
         let mut image = s.kl.space.linear_image(&colours);
         if let Some(p) = self.periodic()
@@ -685,7 +689,7 @@ impl MaterialModel {
                 && let Some(c) = &self.subspaces()[k].colour_marginals
             {
                 let mut planes = ColourSpace::Lab.planes(&out);
-                c.transfer(&mut planes, o.border());
+                c.transfer(&mut planes, o.border(), ColourSpace::Lab);
                 out = ColourSpace::Lab.linear_image(&planes);
                 if let Some(heights) = &cache.heights {
                     self.match_lit(k, &mut out, heights, o.edges());

@@ -834,3 +834,38 @@ fn an_enlarged_leather_has_the_measured_chroma_at_coarse_scales() {
         "the chroma: {ratios:.2?}"
     );
 }
+
+/// A grey photograph's a* and b* vary by the Lab conversion's rounding alone (by 3e-5 units
+/// on this crop): its model keeps no texture of them (flat chroma factors, no exemplar
+/// chroma), so its synthesis draws, lays and transfers no chroma, and comes out grey. The same
+/// photograph with a faint blue cast in its shadows keeps both and comes out tinted.
+#[test]
+fn a_grey_photograph_models_no_chroma_and_a_tinted_one_does() {
+    let photo = btfmrf::btf::io::read_image(&data("textures/gravel.png")).unwrap();
+    let grey = photo.slice(ndarray::s![.., ..160, ..160]).to_owned();
+    let mut tinted = grey.clone();
+    tinted
+        .index_axis_mut(ndarray::Axis(0), 2)
+        .mapv_inplace(|v| v + 0.02 * (1.0 - v));
+    let zenith = Direction::new(0.0, 0.0);
+    for (image, has_chroma) in [(grey, false), (tinted, true)] {
+        let btf =
+            Btf::from_images(DirectionSet::zenith(), DirectionSet::zenith(), vec![image]).unwrap();
+        let model = analyze(&btf, &AnalysisOptions::default(), &NoProgress)
+            .unwrap()
+            .0;
+        let exemplar = model.exemplar().expect("a photograph keeps an exemplar");
+        assert_eq!(exemplar.chroma.is_some(), has_chroma);
+        let synth = model
+            .synthesize_image(&zenith, &zenith, &plain_options(128, 128, 1))
+            .unwrap();
+        let [_, a, b] = lab(&synth);
+        let (a_spread, b_spread) = (spread(&a).0, spread(&b).0);
+        println!("chroma {has_chroma}: a* std {a_spread:.5}, b* std {b_spread:.5}");
+        if has_chroma {
+            assert!(b_spread > 0.3, "{b_spread}");
+        } else {
+            assert!(a_spread < 0.01 && b_spread < 0.01, "{a_spread} {b_spread}");
+        }
+    }
+}

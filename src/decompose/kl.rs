@@ -67,6 +67,18 @@ impl ColourSpace {
         out
     }
 
+    /// The least variation (largest minus smallest value, in this space's units) a colour
+    /// coordinate or a KL factor needs to be visible: a hundredth of a Lab unit (an 8-bit sRGB
+    /// step is 0.2 to 1.2 units), in linear RGB a thirtieth of the darkest 8-bit step. The
+    /// rounding of the Lab conversion alone gives a grey photograph's a* and b* a range of
+    /// about 3e-5 units (the gravel photograph's).
+    pub fn visible_range(self) -> f64 {
+        match self {
+            ColourSpace::LinearRgb => 1e-5,
+            ColourSpace::Lab => 0.01,
+        }
+    }
+
     /// Colour planes of a planar `(3, h, w)` linear RGB image in this space, `(h, w)` each.
     pub fn planes(self, image: &Array3<f32>) -> [Array2<f64>; 3] {
         let image = self.convert(image);
@@ -89,6 +101,16 @@ impl ColourSpace {
             });
         out
     }
+}
+
+/// Whether the largest and smallest of `values` are less than `range` apart (`true` for none).
+pub fn varies_less_than<'a>(values: impl IntoIterator<Item = &'a f64>, range: f64) -> bool {
+    let (low, high) = values
+        .into_iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+            (l.min(v), h.max(v))
+        });
+    high - low < range || low > high
 }
 
 /// A colour mean and orthonormal basis in a colour space: `factor = T^T (x - mean)`,
@@ -162,6 +184,21 @@ impl KlBasis {
                     .map(|c| self.basis[c][k] * (f64::from(image[[c, y, x]]) - self.mean[c]))
                     .sum()
             })
+        })
+    }
+
+    /// [`KlBasis::forward`] with every factor that varies by less than the space's
+    /// [`ColourSpace::visible_range`] set to its mean: a grey image's chroma factors (rounding
+    /// noise of a few 1e-5 Lab units) are then fitted as constant bands, whose synthesis draws
+    /// no noise, instead of as textures no one can see.
+    pub fn visible_factors(&self, image: &Array3<f32>) -> [Array2<f64>; 3] {
+        self.forward(image).map(|factor| {
+            if varies_less_than(&factor, self.space.visible_range()) {
+                let mean = factor.mean().unwrap_or(0.0);
+                factor.mapv(|_| mean)
+            } else {
+                factor
+            }
         })
     }
 
@@ -264,6 +301,45 @@ mod tests {
         };
         let (linear, lab) = (spread(ColourSpace::LinearRgb), spread(ColourSpace::Lab));
         assert!(linear > 5.0 && lab < 3.0, "linear {linear}, lab {lab}");
+    }
+
+    #[test]
+    fn a_grey_image_keeps_its_lightness_factor_and_flattens_its_chroma_factors() {
+        let grey = Array3::from_shape_fn((3, 16, 16), |(_, y, x)| {
+            0.05 + 0.9 * (((x * 7 + y * 3) % 16) as f32 / 15.0)
+        });
+        let kl = KlBasis::fit(&grey, ColourSpace::Lab);
+        let raw = kl.forward(&grey);
+        // The conversion's rounding alone leaves the chroma factors a little spread, which a
+        // relative flatness test would take for a texture.
+        let spread = |f: &Array2<f64>| {
+            f.fold(f64::NEG_INFINITY, |m, &v| m.max(v)) - f.fold(f64::INFINITY, |m, &v| m.min(v))
+        };
+        assert!(spread(&raw[0]) > 50.0, "{}", spread(&raw[0]));
+        let visible = kl.visible_factors(&grey);
+        assert_eq!(visible[0], raw[0]);
+        for k in 1..3 {
+            assert!(
+                spread(&raw[k]) < ColourSpace::Lab.visible_range(),
+                "{}",
+                spread(&raw[k])
+            );
+            assert_eq!(spread(&visible[k]), 0.0, "factor {k}");
+        }
+        // A faint tint a display shows (a tenth of a unit of b*) stays a texture.
+        let tinted = Array3::from_shape_fn((3, 16, 16), |(c, y, x)| {
+            grey[[c, y, x]] * if c == 2 && x % 2 == 0 { 0.999 } else { 1.0 }
+        });
+        let kl = KlBasis::fit(&tinted, ColourSpace::Lab);
+        let visible = kl.visible_factors(&tinted);
+        assert!(spread(&visible[1]) > 0.05, "{}", spread(&visible[1]));
+    }
+
+    #[test]
+    fn variation_is_the_largest_minus_the_smallest_value() {
+        assert!(varies_less_than(&[1.0, 1.004, 0.997], 0.01));
+        assert!(!varies_less_than(&[1.0, 1.006, 0.996], 0.01));
+        assert!(varies_less_than(&[], 0.01));
     }
 
     #[test]

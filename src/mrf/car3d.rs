@@ -305,6 +305,10 @@ impl BandModel for Car3dModel {
         ndarray::stack(ndarray::Axis(0), &views).expect("equal channel shapes")
     }
 
+    fn flat_means(&self) -> Option<Vec<f64>> {
+        self.sigma.iter().all(|&v| v == 0.0).then(|| self.mean.to_vec())
+    }
+
     fn write(&self, w: &mut Writer) {
         w.u8(self.order);
         w.f32s(&self.mean);

@@ -436,6 +436,10 @@ impl BandModel for GmrfModel {
             .insert_axis(Axis(0))
     }
 
+    fn flat_means(&self) -> Option<Vec<f64>> {
+        (self.sigma2 <= 0.0).then(|| vec![self.mean])
+    }
+
     fn write(&self, w: &mut Writer) {
         super::write_plane_record(w, self.order, self.mean, self.sigma2, &self.gamma);
     }

@@ -46,6 +46,11 @@ pub trait BandModel: Clone + std::fmt::Debug + PartialEq + Send + Sync + Sized +
         tileable: bool,
     ) -> Array3<f64>;
 
+    /// The model's value per plane when every sample it makes is that constant (no noise
+    /// variance: a flat band, such as a grey image's chroma factors), so a synthesis can skip
+    /// drawing noise and solving; `None` otherwise.
+    fn flat_means(&self) -> Option<Vec<f64>>;
+
     /// [`BandModel::synthesize_from`] with the noise drawn from `seed`: the same seed and size
     /// give every model of the family the same noise (coherent subspaces).
     fn synthesize(&self, rows: usize, cols: usize, seed: u64, tileable: bool) -> Array3<f64> {
@@ -321,6 +326,37 @@ mod tests {
         let joint = Car3dModel::fit(Array3::zeros((3, 4, 4)).view(), 1).model;
         assert!(Levels::new(vec![vec![joint.clone()]]).is_some());
         assert!(Levels::new(vec![vec![joint; 3]]).is_none());
+    }
+
+    /// The flat shortcut against the model's own synthesis: the same values at every site.
+    fn flat_means_are_what_it_synthesizes<M: BandModel>(band: Array3<f64>) {
+        let model = M::fit(band.view(), 2).model;
+        let means = model.flat_means().expect("a flat band fits a flat model");
+        for tileable in [false, true] {
+            let sample = model.synthesize(9, 13, 5, tileable);
+            for (p, plane) in sample.outer_iter().enumerate() {
+                assert!(plane.iter().all(|&v| v == means[p]), "{} {p}", M::NAME);
+            }
+        }
+        let textured = band.mapv(|v| v * 2.0)
+            + Array3::from_shape_fn(band.dim(), |(p, y, x)| {
+                ((p * 5 + y * 3 + x * 7) % 11) as f64
+            });
+        assert!(
+            M::fit(textured.view(), 2).model.flat_means().is_none(),
+            "{}",
+            M::NAME
+        );
+    }
+
+    #[test]
+    fn a_flat_band_synthesizes_its_means_without_noise() {
+        let band = |planes: usize| {
+            Array3::from_shape_fn((planes, 12, 12), |(p, _, _)| [2.5, -1.0, 0.25][p])
+        };
+        flat_means_are_what_it_synthesizes::<Car2dModel>(band(1));
+        flat_means_are_what_it_synthesizes::<GmrfModel>(band(1));
+        flat_means_are_what_it_synthesizes::<Car3dModel>(band(3));
     }
 
     #[test]
