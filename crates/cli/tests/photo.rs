@@ -68,7 +68,8 @@ fn a_photograph_is_analysed_and_enlarged_end_to_end() {
     // default for a photograph) well below the random-phase level, which the MRF alone only
     // reaches (measured at 512^2: x0.57 with it, x1.00 without; at 1024^2, since the quilt
     // holds back patches it has laid already, x0.94 the another-crop level, x0.87 with a
-    // 320 x 320 exemplar crop and x0.84 with the 360 x 360 default); its grey stays grey.
+    // 320 x 320 exemplar crop, x0.84 with the 360 x 360 default, x0.85 since a grey
+    // photograph keeps no chroma); its grey stays grey.
     let y = Yardstick::new(&measured, None, 1).unwrap();
     let v = y.judge(&enlarged).unwrap();
     println!("gravel 2dcar 1024^2: {v:?}");
