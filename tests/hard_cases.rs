@@ -182,6 +182,52 @@ mod mrf_cases {
         Array3::from_shape_fn((3, h, w), |(c, y, x)| f(c, y, x))
     }
 
+    /// A grey capture (R = G = B everywhere): its Lab chroma is rounding noise, so with every
+    /// model family the exemplar keeps no chroma (it kept that noise before) and the synthesis
+    /// is grey.
+    #[test]
+    fn a_grey_capture_synthesizes_grey_with_every_model() {
+        let grey = btf_of(
+            (0..4)
+                .map(|k| {
+                    image(48, 48, |_, y, x| {
+                        0.05 + ((x * 7 + y * 13 + k * 5) % 29) as f32 / 32.0
+                    })
+                })
+                .collect(),
+        );
+        for kind in ModelKind::ALL {
+            let options = AnalysisOptions {
+                kind,
+                clusters: 2,
+                ..AnalysisOptions::default()
+            };
+            let (model, _) = analyze(&grey, &options, &NoProgress).unwrap();
+            let exemplar = model
+                .exemplar()
+                .expect("a texture without a relief keeps one");
+            assert!(exemplar.chroma.is_none(), "{kind}");
+            let o = SynthesisOptions {
+                rows: 64,
+                cols: 64,
+                seed: 3,
+                tileable: false,
+            };
+            let im = model
+                .synthesize_image(&Direction::new(0.0, 0.0), &Direction::new(20.0, 0.0), &o)
+                .unwrap();
+            let (_, h, w) = im.dim();
+            let worst = (0..h * w)
+                .map(|i| {
+                    let rgb = [0, 1, 2].map(|c| im[[c, i / w, i % w]]);
+                    let lab = btfmrf::color::linear_to_lab(rgb);
+                    lab[1].abs().max(lab[2].abs())
+                })
+                .fold(0.0f32, f32::max);
+            assert!(worst < 0.05, "{kind}: chroma up to {worst} Lab");
+        }
+    }
+
     #[test]
     fn constant_saturated_tiny_and_thin_images() {
         let constant = btf_of(vec![image(32, 32, |_, _, _| 0.4); 4]);
