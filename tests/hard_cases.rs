@@ -137,7 +137,7 @@ fn lights_below_the_horizon_give_ambient_only_and_views_below_it_do_not_break() 
 mod mrf_cases {
     use btfmrf::analysis::{AnalysisOptions, AnalysisRepair, analyze};
     use btfmrf::btf::{Btf, Direction, DirectionSet};
-    use btfmrf::model::ModelKind;
+    use btfmrf::model::{MaterialModel, ModelKind};
     use btfmrf::mrf::{BandModel, Car2dModel, Car3dModel, GmrfModel};
     use btfmrf::progress::NoProgress;
     use btfmrf::synthesis::SynthesisOptions;
@@ -155,25 +155,32 @@ mod mrf_cases {
         Btf::from_images(DirectionSet::zenith(), lights, images).unwrap()
     }
 
+    /// `btf` analysed with `kind` (three clusters) and a 48 x 40 image of it synthesized, seen
+    /// from above under a light 30 degrees off the zenith.
+    fn model_and_image(btf: &Btf, kind: ModelKind, what: &str) -> (MaterialModel, Array3<f32>) {
+        let options = AnalysisOptions {
+            kind,
+            clusters: 3,
+            ..AnalysisOptions::default()
+        };
+        let (model, _) =
+            analyze(btf, &options, &NoProgress).unwrap_or_else(|e| panic!("{what} {kind}: {e}"));
+        let o = SynthesisOptions {
+            rows: 48,
+            cols: 40,
+            seed: 1,
+            tileable: false,
+        };
+        let im = model
+            .synthesize_image(&Direction::new(0.0, 0.0), &Direction::new(30.0, 0.0), &o)
+            .unwrap();
+        (model, im)
+    }
+
     /// Analyses with every model kind and synthesizes a 48 x 40 image; all must be finite.
     fn survives(btf: &Btf, what: &str) {
         for kind in ModelKind::ALL {
-            let options = AnalysisOptions {
-                kind,
-                clusters: 3,
-                ..AnalysisOptions::default()
-            };
-            let (model, _) = analyze(btf, &options, &NoProgress)
-                .unwrap_or_else(|e| panic!("{what} {kind}: {e}"));
-            let o = SynthesisOptions {
-                rows: 48,
-                cols: 40,
-                seed: 1,
-                tileable: false,
-            };
-            let im = model
-                .synthesize_image(&Direction::new(0.0, 0.0), &Direction::new(30.0, 0.0), &o)
-                .unwrap();
+            let (_, im) = model_and_image(btf, kind, what);
             assert!(im.iter().all(|v| v.is_finite()), "{what} {kind}");
         }
     }
@@ -197,25 +204,11 @@ mod mrf_cases {
                 .collect(),
         );
         for kind in ModelKind::ALL {
-            let options = AnalysisOptions {
-                kind,
-                clusters: 2,
-                ..AnalysisOptions::default()
-            };
-            let (model, _) = analyze(&grey, &options, &NoProgress).unwrap();
+            let (model, im) = model_and_image(&grey, kind, "grey");
             let exemplar = model
                 .exemplar()
                 .expect("a texture without a relief keeps one");
             assert!(exemplar.chroma.is_none(), "{kind}");
-            let o = SynthesisOptions {
-                rows: 64,
-                cols: 64,
-                seed: 3,
-                tileable: false,
-            };
-            let im = model
-                .synthesize_image(&Direction::new(0.0, 0.0), &Direction::new(20.0, 0.0), &o)
-                .unwrap();
             let (_, h, w) = im.dim();
             let worst = (0..h * w)
                 .map(|i| {
