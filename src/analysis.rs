@@ -121,8 +121,10 @@ pub struct AnalysisOptions {
 /// Enlarged to 1024^2 (seeds 1-4, structure distance), 256 -> 320 took brick 0.118-0.138 ->
 /// 0.115-0.123, grass 0.050-0.052 -> 0.045-0.047 and gravel 0.046-0.047 -> 0.041-0.042, the
 /// models 46-68 KB -> 65-99 KB (docs/BENCHMARKS.md); 320 -> 360 took brick to 0.109-0.120
-/// (within 1.2x of the `texture-synthesis` peer's 0.1016 at every seed), grass to
-/// 0.044-0.047 and gravel to 0.040-0.041 at 81-125 KB, for about 4 % more synthesis time (the
+/// (within 1.2x of the `texture-synthesis` peer's 0.1016 at seeds 1-4; since a grey
+/// photograph keeps no chroma 0.113-0.122, and one seed in ten beyond 1.2x, as before), grass
+/// to 0.044-0.047 and gravel to 0.040-0.041 at 81-125 KB (77-120 KB without the grey
+/// photographs' chroma), for about 4 % more synthesis time (the
 /// candidates scored per patch are capped, [`crate::geometry::quilt`]; the usage sums grow
 /// with the crop). A model of a
 /// photograph that deflate cannot shrink (random noise) takes 134.6 KB at 360, 107.0 KB at
@@ -138,8 +140,9 @@ pub fn exemplar_side_for(subspaces: usize) -> usize {
     }
 }
 
-/// The exemplar side for one subspace image (a photograph): a 127 KiB crop, and 4 KiB of
-/// chroma at 8 x 8 blocks; with the MRF and the tables at most about 135 KB, inside
+/// The exemplar side for one subspace image (a photograph): a 127 KiB crop, and for a colour
+/// photograph 4 KiB of chroma at 8 x 8 blocks; with the MRF and the tables at most about
+/// 135 KB, inside
 /// [`MODEL_BUDGET`] whatever the photograph.
 pub const PHOTOGRAPH_EXEMPLAR_SIDE: usize = 360;
 /// The exemplar side for several subspace images: crops of 16 KiB, the mean and up to six

@@ -194,8 +194,7 @@ impl KlBasis {
     pub fn visible_factors(&self, image: &Array3<f32>) -> [Array2<f64>; 3] {
         self.forward(image).map(|factor| {
             if varies_less_than(&factor, self.space.visible_range()) {
-                let mean = factor.mean().unwrap_or(0.0);
-                factor.mapv(|_| mean)
+                Array2::from_elem(factor.dim(), factor.mean().unwrap_or(0.0))
             } else {
                 factor
             }

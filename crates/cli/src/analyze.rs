@@ -173,11 +173,12 @@ pub struct Args {
     /// structure finer than a third of the crop, which second-order MRF models lose (cells,
     /// grains, stones, the shadows of a relief under each light). The coarser L* comes from
     /// the MRF, or from the laid crops themselves where a check finds them clearly closer to
-    /// the measured images (see --coarse). The crops' a* and b* are stored too, averaged over
-    /// 2 x 2 pixels (4 x 4 for a 256 crop, 8 x 8 for 320 or 360; at most 8 KiB), and laid with
-    /// the same patches, so each stone or thread keeps its own colour. Default: 360 for a
-    /// photograph (one subspace image, one crop of 127 KiB; a larger crop gives the quilt more
-    /// to choose from: the three photographs' models take 81-125 KB, at most about 135 KB),
+    /// the measured images (see --coarse). The crops' a* and b* are stored too (unless they
+    /// vary by less than 0.01 Lab, as a grey photograph's do), averaged over 2 x 2 pixels
+    /// (4 x 4 for a 256 crop, 8 x 8 for 320 or 360; at most 8 KiB), and laid with the same
+    /// patches, so each stone or thread keeps its own colour. Default: 360 for a photograph
+    /// (one subspace image, one crop of 127 KiB; a larger crop gives the quilt more to choose
+    /// from: the three grey photographs' models take 77-120 KB, at most about 135 KB),
     /// 128 for several subspace images (the mean, 16 KiB, and up to six deviations, 8 KiB
     /// each).
     /// Stored when there is no range map (a photograph), and beside a range map when a check
