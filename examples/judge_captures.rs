@@ -7,7 +7,7 @@
 //! and over the another-crop level, and the mean colour distance.
 //!
 //! Run: `cargo run --release --example judge_captures -- CAPTURE... [--clusters N]
-//! [--model KIND] [--no-lit-tables] [--no-light-tables] [--no-light-weights] [--exemplar N]`, e.g.
+//! [--model KIND] [--no-lit-tables] [--no-light-tables] [--no-light-chroma] [--no-light-weights] [--exemplar N]`, e.g.
 //! `../shared/data/rti/*`; `--exemplar N` sets the exemplar's side (0: none).
 
 use btfmrf::analysis::{AnalysisOptions, analyze};
@@ -32,6 +32,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--model" => options.kind = args.next().ok_or("--model KIND")?.parse()?,
             "--no-lit-tables" => options.lit_matching = false,
             "--no-light-tables" => options.light_tables = false,
+            "--no-light-chroma" => options.light_chroma = false,
             "--no-light-weights" => options.light_weights = false,
             "--exemplar" => {
                 options.exemplar_side = Some(args.next().ok_or("--exemplar N")?.parse()?)
@@ -58,8 +59,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let measured = btf.image(0, l)?;
             let y = Yardstick::new(&measured, None, 1)?;
             let v = y.judge(&model.image_from_cache(&cache, &view, &light)?)?;
+            let [cl, ca, cb] = v.judgement.colour_lab_channels;
             println!(
-                "{path} light {l} ({:.0}/{:.0}): x{:.2} random phase, x{:.2} crop, colour {:.2} Lab",
+                "{path} light {l} ({:.0}/{:.0}): x{:.2} random phase, x{:.2} crop, colour {:.2} Lab (L* {cl:.2}, a* {ca:.2}, b* {cb:.2})",
                 light.theta_deg,
                 light.phi_deg,
                 v.structure_vs_random_phase,

@@ -8,7 +8,7 @@
 //! row above synthesized row, the nine lights left to right).
 //!
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
-//! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--no-light-tables] [--no-light-weights] [--verbose]
+//! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--no-light-tables] [--no-light-chroma] [--no-light-weights] [--verbose]
 //! [--sheet DIR] [--seed N] [--pair-rank K] [--shadows attached|cast|auto]
 //! [--coarse laid|mrf|auto] [--view N] [--halfway]`; `--view N` judges in the Bonn set's
 //! view N instead of the frontal view 0 (1-6 at 15 degrees, 7-18 at 30, 19-36 at 45, 37-60 at
@@ -25,7 +25,8 @@
 //! per-pair tables stored that way would give it; `--direction-share` weighs the light and view directions in the clustering
 //! (see `AnalysisOptions::direction_share`); `--verbose` adds each light's subspace and its
 //! representative, the spread of L*, a* and b* blurred at 4 px over the measured (coarse colour
-//! variation), and the share of the L*, a* and b* variance in neighbour differences (near 0:
+//! variation), the a* and b* standard deviations and kurtoses of the measured and the
+//! synthesized image, and the share of the L*, a* and b* variance in neighbour differences (near 0:
 //! colour constant over regions; 1: white noise), its L* percentiles, and the share of the
 //! chroma steps found off lightness edges.
 
@@ -201,6 +202,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--no-colour-tables" => options.colour_matching = false,
             "--no-lit-tables" => options.lit_matching = false,
             "--no-light-tables" => options.light_tables = false,
+            "--no-light-chroma" => options.light_chroma = false,
             "--no-light-weights" => options.light_weights = false,
             "--shadows" => {
                 options.shadows = match args.next().ok_or("--shadows attached|cast|auto")?.as_str()
@@ -335,6 +337,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             if verbose {
                 let [l, a, b] = v.judgement.colour_lab_channels;
                 println!("  colour per channel: L* {l:.2}, a* {a:.2}, b* {b:.2} Lab");
+                let m = btfmrf::eval::Signature::of(&measured, 1)?;
+                let ([ms, mk], [ss, sk]) = (
+                    [m.chroma_std(), m.chroma_kurtosis()],
+                    [v.judgement.chroma_std, v.judgement.chroma_kurtosis],
+                );
+                println!(
+                    "  a*, b* standard deviation: measured [{:.2}, {:.2}], synthesized [{:.2}, {:.2}]; kurtosis: measured [{:.1}, {:.1}], synthesized [{:.1}, {:.1}]",
+                    ms[0], ms[1], ss[0], ss[1], mk[0], mk[1], sk[0], sk[1]
+                );
                 let crop = y.levels().crop.judgement.groups;
                 println!(
                     "  groups over the crop level ({}): {}",

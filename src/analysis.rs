@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use crate::btf::Btf;
 use crate::decompose::colour_transfer::ColourMarginals;
 use crate::decompose::kl::varies_less_than;
-use crate::decompose::marginals::{self, QuantileGrid, Quantiles};
+use crate::decompose::marginals::{self, QUANTILES, QuantileGrid, Quantiles};
 use crate::decompose::pyramid::{self, auto_levels};
 use crate::decompose::stationarity::{NON_STATIONARY_SHARE, block_mean_share};
 use crate::decompose::{ClusterOptions, ColourSpace, KlBasis, Pyramid, SubspaceClustering};
@@ -20,7 +20,7 @@ use crate::geometry::relight::Shadows;
 use crate::geometry::{self, detail_scale, relight};
 use crate::model::{
     AnyLevels, BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma,
-    LIGHTNESS_BANDS, LightLightness, LightWeights, LitMarginals, MAX_CHROMA_STEP,
+    LIGHTNESS_BANDS, LightChroma, LightLightness, LightWeights, LitMarginals, MAX_CHROMA_STEP,
     MAX_EXEMPLAR_COMPONENTS, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
     ModelError, ModelKind, PeriodicPart, Principal, RangeMap, Result, SubspaceModel, format,
 };
@@ -68,6 +68,12 @@ pub struct AnalysisOptions {
     /// finished image those bands and that lightness marginal, blended over the nearest
     /// lights ([`crate::model::LightLightness`]). Default: true.
     pub light_tables: bool,
+    /// With the light tables, also store the measured a* and b* quantiles under every light
+    /// of their view (17 each, a byte a value; 3.0 KB for 81 lights before deflate) and map
+    /// the finished image's a* and b* onto them, blended over the nearest lights
+    /// ([`crate::model::LightChroma`]). None for a material whose chroma varies less than
+    /// the visible range under every light. Default: true.
+    pub light_chroma: bool,
     /// Beside a range map and an exemplar (not on a lattice), store every light's own weights
     /// on the exemplar's L* deviations, its crop in the registered view projected on them
     /// (a byte a light and deviation), and count those crops in the deviations: a light's
@@ -77,8 +83,9 @@ pub struct AnalysisOptions {
     /// ([`crate::model::PeriodicPart::light_weights`]). Default: true.
     pub light_weights: bool,
     /// Largest model file, bytes as written (deflated); `None`: no limit. A model above it
-    /// drops its exemplar's principal deviations, the last first, until it fits or none is
-    /// left ([`within_budget`]). Default: [`MODEL_BUDGET`].
+    /// drops its light chroma tables where that alone makes it fit, else its exemplar's
+    /// principal deviations, the last first, until it fits or none is left
+    /// ([`within_budget`]). Default: [`MODEL_BUDGET`].
     pub max_bytes: Option<usize>,
     /// Largest side of the structure exemplar (0: none; see [`crate::model::Exemplar`]),
     /// stored when the model works in CIE Lab and has no range map, or has one and the
@@ -172,6 +179,7 @@ impl Default for AnalysisOptions {
             colour_matching: true,
             lit_matching: true,
             light_tables: true,
+            light_chroma: true,
             light_weights: true,
             max_bytes: Some(MODEL_BUDGET),
             exemplar_side: None,
@@ -642,7 +650,9 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
             .collect()
     };
     let light_lightness = match &range_map {
-        Some(_) if options.light_tables => Some(light_lightness(btf, frontal)?),
+        Some(_) if options.light_tables => {
+            Some(light_lightness(btf, frontal, options.light_chroma)?)
+        }
         _ => None,
     };
     let model = MaterialModel::new(MaterialParts {
@@ -671,27 +681,49 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
 }
 
 /// The measured L* quantiles and detail band spreads of every light's image in `view`
-/// ([`LightLightness`]); no spreads where the image halves too few times for every band.
-fn light_lightness(btf: &Btf, view: usize) -> Result<LightLightness> {
+/// ([`LightLightness`]); no spreads where the image halves too few times for every band; with
+/// `with_chroma`, its a* and b* quantiles too, unless no light's chroma varies visibly.
+fn light_lightness(btf: &Btf, view: usize, with_chroma: bool) -> Result<LightLightness> {
     let probabilities = marginals::band_probabilities();
-    let (tables, spreads): (Vec<_>, Vec<_>) = (0..btf.lights().len())
+    let chroma_probabilities = QuantileGrid::NormalTails.probabilities(QUANTILES);
+    let measured = (0..btf.lights().len())
         .into_par_iter()
         .map(|l| {
-            let [lightness, _, _] = ColourSpace::Lab.planes(&btf.image(view, l)?);
+            let [lightness, a, b] = ColourSpace::Lab.planes(&btf.image(view, l)?);
             let spreads: Vec<f32> = pyramid::detail_spreads(&lightness, LIGHTNESS_BANDS)
                 .into_iter()
                 .map(|s| s as f32)
                 .collect();
+            // The chroma's quantiles, and whether it shows.
+            let visible = ColourSpace::Lab.visible_range();
+            let shows = [&a, &b]
+                .iter()
+                .any(|p| !varies_less_than(p.iter(), visible));
+            let chroma: LightChroma = [a, b].map(|plane| {
+                let q = marginals::quantiles_at(&plane, &chroma_probabilities);
+                std::array::from_fn(|k| q[k] as f32)
+            });
             Ok((
                 LitMarginals {
                     lightness: marginals::quantiles_at(&lightness, &probabilities),
                 },
                 spreads,
+                (chroma, shows),
             ))
         })
-        .collect::<Result<Vec<_>>>()?
-        .into_iter()
-        .unzip();
+        .collect::<Result<Vec<_>>>()?;
+    let mut tables = Vec::with_capacity(measured.len());
+    let mut spreads = Vec::with_capacity(measured.len());
+    let mut chroma = Vec::with_capacity(measured.len());
+    let mut coloured = false;
+    for (t, s, (c, shows)) in measured {
+        tables.push(t);
+        spreads.push(s);
+        chroma.push(c);
+        coloured |= shows;
+    }
+    // A grey material's a* and b* differ from 0 by the conversion's rounding: nothing to keep.
+    let chroma = (with_chroma && coloured).then(|| format::as_stored_light_chroma(&chroma));
     let whole = spreads.iter().all(|s| s.len() == LIGHTNESS_BANDS);
     let spreads = whole.then(|| {
         format::as_stored_light_rows(&spreads)
@@ -703,6 +735,7 @@ fn light_lightness(btf: &Btf, view: usize) -> Result<LightLightness> {
         view,
         tables,
         spreads,
+        chroma,
     })
 }
 
@@ -858,11 +891,14 @@ const JUDGED_SIDE: usize = 256;
 /// The default largest model file, bytes: issue 11's "at most 150 KB with every part".
 pub const MODEL_BUDGET: usize = 150_000;
 
-/// `model` within `max_bytes` as written: while it is larger, its exemplar's last principal
-/// deviation is dropped (L* first, 16 KiB each at a 128 x 128 crop, then chroma) and the pair
-/// gains are measured again on what synthesis now makes. The 3D CAR's larger band models put
-/// the built-in sponge and leather at 154 KB with three L* deviations. Also a note saying
-/// what was dropped, or that the model still does not fit.
+/// `model` within `max_bytes` as written: while it is larger, its light chroma tables are
+/// dropped if that alone brings it within (a principal deviation holds more of the material
+/// than they do), else its exemplar's last principal deviation (L* first, 16 KiB each at a
+/// 128 x 128 crop, then chroma) and the pair gains are measured again on what synthesis now
+/// makes. The 3D CAR's larger band models put the built-in sponge and leather at 154 KB with
+/// three L* deviations; the leather's 3D CAR model at 149.4 KB before the chroma tables
+/// (2.4 KB deflated) drops them and keeps its deviations. Also a note saying what was
+/// dropped, or that the model still does not fit.
 fn within_budget(
     mut model: MaterialModel,
     max_bytes: Option<usize>,
@@ -872,7 +908,15 @@ fn within_budget(
         return Ok((model, None));
     };
     let (mut dropped, mut bytes) = (0, format::to_bytes(&model).len());
+    let mut chroma_dropped = false;
     while bytes > max {
+        if let Some(lean) = without_light_chroma(&model)? {
+            let lean_bytes = format::to_bytes(&lean).len();
+            if lean_bytes <= max {
+                (model, bytes, chroma_dropped) = (lean, lean_bytes, true);
+                break;
+            }
+        }
         let mut parts = model.into_parts();
         if !parts
             .exemplar
@@ -889,12 +933,32 @@ fn within_budget(
         dropped += 1;
         bytes = format::to_bytes(&model).len();
     }
-    let note = (dropped > 0).then(|| {
-        format!(
-            "dropped {dropped} of the exemplar's principal deviations to keep the model within {max} bytes (now {bytes}; --max-bytes sets the limit)"
-        )
-    });
-    Ok((model, note))
+    let what = match (dropped, chroma_dropped) {
+        (0, false) => return Ok((model, None)),
+        (0, true) => "the light chroma tables".to_string(),
+        (d, false) => format!("{d} of the exemplar's principal deviations"),
+        (d, true) => {
+            format!("{d} of the exemplar's principal deviations and the light chroma tables")
+        }
+    };
+    Ok((
+        model,
+        Some(format!(
+            "dropped {what} to keep the model within {max} bytes (now {bytes}; --max-bytes sets the limit)"
+        )),
+    ))
+}
+
+/// `model` without its light chroma tables; `None` when it has none.
+fn without_light_chroma(model: &MaterialModel) -> Result<Option<MaterialModel>> {
+    if model.light_lightness().is_none_or(|t| t.chroma.is_none()) {
+        return Ok(None);
+    }
+    let mut parts = model.clone().into_parts();
+    if let Some(t) = parts.light_lightness.as_mut() {
+        t.chroma = None;
+    }
+    Ok(Some(MaterialModel::new(parts)?))
 }
 
 /// A fitted subspace model, the repairs its fit made, its measured image's block-mean share

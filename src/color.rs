@@ -185,6 +185,23 @@ pub fn lab_to_linear_in_gamut(lab: [f32; 3]) -> [f32; 3] {
     lab_to_linear([lab[0], inside * lab[1], inside * lab[2]]).map(|c| c.max(0.0))
 }
 
+/// A chroma coordinate (a* or b*) per unit of lightness, `c / (L* + 16)`: a function of the
+/// chromaticity alone (for colours above the dark linear segment of L*), so scaling a pixel's
+/// linear RGB, as shading does, leaves it as it is. [`chroma_of`] inverts it.
+pub fn chroma_per_lightness(c: f64, l: f64) -> f64 {
+    c / lightness_offset(l)
+}
+
+/// The chroma coordinate of `per_lightness` (see [`chroma_per_lightness`]) at lightness `l`.
+pub fn chroma_of(per_lightness: f64, l: f64) -> f64 {
+    per_lightness * lightness_offset(l)
+}
+
+/// `L* + 16`, at least 1 (L* is not negative for a colour of non-negative luminance).
+fn lightness_offset(l: f64) -> f64 {
+    (l + 16.0).max(1.0)
+}
+
 /// CIE76 colour difference: the Euclidean distance in Lab.
 pub fn delta_e76(a: [f32; 3], b: [f32; 3]) -> f32 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
@@ -210,6 +227,27 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    fn shading_leaves_the_chroma_per_unit_of_lightness() {
+        // A colour and the same colour at a tenth of its light, above L*'s dark segment.
+        for rgb in [[0.6f32, 0.3, 0.1], [0.2, 0.5, 0.7]] {
+            let per = |rgb: [f32; 3]| {
+                let [l, a, b] = linear_to_lab(rgb);
+                [a, b].map(|c| chroma_per_lightness(f64::from(c), f64::from(l)))
+            };
+            let (lit, shaded) = (per(rgb), per(rgb.map(|v| 0.1 * v)));
+            for (x, y) in lit.iter().zip(&shaded) {
+                assert!((x - y).abs() < 1e-4, "{lit:?} {shaded:?}");
+            }
+            let [l, a, _] = linear_to_lab(rgb);
+            let back = chroma_of(
+                chroma_per_lightness(f64::from(a), f64::from(l)),
+                f64::from(l),
+            );
+            assert!((back - f64::from(a)).abs() < 1e-9);
+        }
+    }
     use approx::assert_abs_diff_eq;
 
     fn srgb8(r: u8, g: u8, b: u8) -> [f32; 3] {

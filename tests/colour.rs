@@ -664,6 +664,20 @@ fn a_relit_synthesis_has_its_representatives_lightness() {
     assert!(without > 1.2, "{without}");
 }
 
+/// The built-in leather (128^2, seed 5) rendered by the generator in the frontal view under
+/// `lights` (theta, phi in degrees): references between the measured lights.
+fn leather_under(lights: &[(f64, f64)]) -> Btf {
+    SyntheticBtf::with_directions(
+        SyntheticMaterial::Leather,
+        128,
+        5,
+        &DirectionSet::new(vec![Direction::new(0.0, 0.0)]).unwrap(),
+        &DirectionSet::new(lights.iter().map(|&(t, p)| Direction::new(t, p)).collect()).unwrap(),
+    )
+    .unwrap()
+    .into_btf()
+}
+
 /// Issue 11 item 3: a cluster's lights share one subspace image, whose lightness is matched
 /// at its representative's light only, so at the cluster's other lights the leather's L*
 /// missed the measured by 2-3 Lab units (60-75 degree lights). With the light tables the
@@ -683,15 +697,7 @@ fn every_light_gets_its_measured_lightness_also_between_the_measured_ones() {
     let without = MaterialModel::new(parts).unwrap();
     let view = Direction::new(0.0, 0.0);
     let between = [(37.5, 100.0), (52.5, 170.0), (67.5, 120.0), (67.5, 250.0)];
-    let halfway = SyntheticBtf::with_directions(
-        SyntheticMaterial::Leather,
-        128,
-        5,
-        &DirectionSet::new(vec![view]).unwrap(),
-        &DirectionSet::new(between.map(|(t, p)| Direction::new(t, p)).to_vec()).unwrap(),
-    )
-    .unwrap()
-    .into_btf();
+    let halfway = leather_under(&between);
     // Per model: mean colour distance and geometric-mean structure over the lights and seeds.
     let judged = |lights: &[(f64, f64)], reference: &dyn Fn(usize, &Direction) -> Array3<f32>| {
         let mut scores = [(0.0, 0.0); 2];
@@ -727,6 +733,118 @@ fn every_light_gets_its_measured_lightness_also_between_the_measured_ones() {
     assert!(at.0 <= 1.0 && at.0 < at_without.0, "{at:?} {at_without:?}");
     assert!(mid.0 < mid_without.0, "{mid:?} {mid_without:?}");
     assert!(mid.1 < 1.02 * mid_without.1, "{mid:?} {mid_without:?}");
+}
+
+/// The light chroma tables are kept only where the chroma can be seen: the frontal images of
+/// the built-in leather made grey (each pixel its luminance in every channel) give a model
+/// with light lightness tables and no chroma tables; in colour, a chroma table pair a light.
+#[test]
+fn a_grey_capture_keeps_no_light_chroma() {
+    let leather = Btf::synthetic(SyntheticMaterial::Leather, 48, 5).unwrap();
+    let lights = leather.lights().clone();
+    let frontal = |grey: bool| {
+        let images = (0..lights.len())
+            .map(|l| {
+                let mut image = leather.image(0, l).unwrap();
+                if grey {
+                    let y = btfmrf::geometry::relight::luminance(&image);
+                    for mut channel in image.outer_iter_mut() {
+                        channel.zip_mut_with(&y, |v, &y| *v = y as f32);
+                    }
+                }
+                image
+            })
+            .collect();
+        Btf::from_images(DirectionSet::zenith(), lights.clone(), images).unwrap()
+    };
+    let options = AnalysisOptions {
+        clusters: 6,
+        ..AnalysisOptions::default()
+    };
+    for (grey, kept) in [(true, None), (false, Some(lights.len()))] {
+        let (model, _) = analyze(&frontal(grey), &options, &NoProgress).unwrap();
+        let tables = model
+            .light_lightness()
+            .expect("light tables beside a range map");
+        assert_eq!(tables.chroma.as_ref().map(Vec::len), kept, "grey {grey}");
+    }
+}
+
+/// Issue 11's colour target is per channel: at most 1.0 Lab units of mean |quantile
+/// difference| in each of L*, a* and b*. A cluster's lights share their representative's
+/// chroma, so the leather's b* missed it at five of nine measured frontal lights (1.05-2.29 at
+/// seed 1; another crop of the same material: 0.03-0.08). With every light's a* and b*
+/// quantiles stored beside its L* table, each channel holds the target at every measured
+/// light, and the a* and b* come closer halfway between measured lights too (tables blended).
+/// Measured: see the printed line and docs/BENCHMARKS.md.
+#[test]
+fn every_light_gets_its_measured_chroma() {
+    let btf = Btf::synthetic(SyntheticMaterial::Leather, 128, 5).unwrap();
+    let (model, _) = analyze(&btf, &AnalysisOptions::default(), &NoProgress).unwrap();
+    let chroma = model.light_lightness().and_then(|t| t.chroma.as_ref());
+    assert_eq!(chroma.map(Vec::len), Some(btf.lights().len()));
+    // The same model without the chroma tables (analysis makes everything else alike).
+    let mut parts = model.clone().into_parts();
+    if let Some(t) = parts.light_lightness.as_mut() {
+        t.chroma = None;
+    }
+    let without = MaterialModel::new(parts).unwrap();
+    let view = Direction::new(0.0, 0.0);
+    let o = plain_options(128, 128, 1);
+    // Per model, the worst per-channel gap over the lights, a* and b* apart.
+    let worst = |m: &MaterialModel,
+                 lights: &[(f64, f64)],
+                 reference: &dyn Fn(&Direction) -> Array3<f32>| {
+        let cache = m.synthesis_cache(&o).unwrap();
+        let mut worst = [0.0f64; 2];
+        for &(theta, phi) in lights {
+            let light = Direction::new(theta, phi);
+            let (measured, synth) = (
+                lab(&reference(&light)),
+                lab(&m.image_from_cache(&cache, &view, &light).unwrap()),
+            );
+            for c in 0..2 {
+                worst[c] = worst[c].max(quantile_gap(&measured[c + 1], &synth[c + 1]));
+            }
+        }
+        worst
+    };
+    let measured = btfmrf::eval::JUDGED_LIGHTS;
+    let at_measured = |light: &Direction| {
+        btf.image(0, btf.lights().find(light, 0.5).unwrap())
+            .unwrap()
+    };
+    let (with, with_out) = (
+        worst(&model, &measured, &at_measured),
+        worst(&without, &measured, &at_measured),
+    );
+    let between = [(37.5, 100.0), (52.5, 170.0), (67.5, 120.0)];
+    let halfway = leather_under(&between);
+    let at_between = |light: &Direction| {
+        halfway
+            .image(0, halfway.lights().find(light, 0.5).unwrap())
+            .unwrap()
+    };
+    let (mid, mid_out) = (
+        worst(&model, &between, &at_between),
+        worst(&without, &between, &at_between),
+    );
+    println!(
+        "leather, worst a* / b* gap over {} measured lights: {:.2} / {:.2} with the chroma \
+         tables, {:.2} / {:.2} without; halfway {:.2} / {:.2} against {:.2} / {:.2}",
+        measured.len(),
+        with[0],
+        with[1],
+        with_out[0],
+        with_out[1],
+        mid[0],
+        mid[1],
+        mid_out[0],
+        mid_out[1]
+    );
+    assert!(with.iter().all(|&g| g <= 1.0), "{with:?}");
+    assert!(with_out.iter().any(|&g| g > 1.0), "{with_out:?}");
+    assert!(mid[1] < mid_out[1], "{mid:?} {mid_out:?}");
 }
 
 /// Issue 11 item 3: the demo's sponge (64^2, seed 1), judged over the bench's eight pairs,

@@ -5,9 +5,9 @@ use std::path::Path;
 
 use super::material::{
     BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LIGHTNESS_BANDS,
-    LightLightness, LightWeights, LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS,
-    MAX_EXEMPLAR_STEP, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
-    PeriodicPart, Principal, RangeMap, SubspaceModel,
+    LightChroma, LightLightness, LightWeights, LitMarginals, MAX_CHROMA_STEP,
+    MAX_EXEMPLAR_COMPONENTS, MAX_EXEMPLAR_STEP, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES,
+    MaterialModel, MaterialParts, PeriodicPart, Principal, RangeMap, SubspaceModel,
 };
 use super::{ModelError, Result};
 use crate::btf::{BtfError, DirectionSet};
@@ -32,9 +32,9 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// version 9 files (no cast shadows), version 10 files (an exemplar's coarse variation
 /// always the MRF's), version 11 files (no light lightness tables), version 12 files (no
 /// chroma spreads), version 13 files (an exemplar at every texel), version 14 files (no
-/// light weights on the exemplar) and version 15 files (no light weights on the periods) are
-/// still read.
-pub const VERSION: u16 = 16;
+/// light weights on the exemplar), version 15 files (no light weights on the periods) and
+/// version 16 files (no light chroma tables) are still read.
+pub const VERSION: u16 = 17;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -156,6 +156,7 @@ pub fn to_payload(model: &MaterialModel) -> Vec<u8> {
         model.periodic().and_then(|p| p.light_weights.as_ref()),
     );
     write_light_spreads(&mut w, model.light_lightness());
+    write_light_chroma(&mut w, model.light_lightness());
     w.0
 }
 
@@ -267,6 +268,62 @@ fn read_light_spreads(
     Ok(())
 }
 
+/// The version 17 chroma tables of the light lightness tables ([`LightLightness::chroma`]): a
+/// flag, then the light rows ([`write_light_rows`]), a light's a* quantiles then its b*
+/// quantiles. Stored by quantile across the lights, a byte a value: each quantile's range
+/// over the lights is far narrower than a table's range.
+fn write_light_chroma(w: &mut Writer, tables: Option<&LightLightness>) {
+    let Some(chroma) = tables.and_then(|t| t.chroma.as_ref()) else {
+        w.u8(0);
+        return;
+    };
+    w.u8(1);
+    write_light_rows(w, &chroma_rows(chroma));
+}
+
+/// A light's chroma tables as one row of values (a* then b*).
+fn chroma_rows(chroma: &[LightChroma]) -> Vec<Vec<f32>> {
+    chroma.iter().map(|c| c.concat()).collect()
+}
+
+/// The tables of a row of [`chroma_rows`], each made non-decreasing: the quantiles are coded
+/// over ranges of their own, so rounding can set equal neighbours apart by half a code.
+fn chroma_of_row(row: &[f32]) -> LightChroma {
+    std::array::from_fn(|c| {
+        let mut table: [f32; QUANTILES] = std::array::from_fn(|k| row[c * QUANTILES + k]);
+        for k in 1..QUANTILES {
+            table[k] = table[k].max(table[k - 1]);
+        }
+        table
+    })
+}
+
+/// Light chroma tables as a file stores ([`write_light_chroma`]) and reads them back.
+pub fn as_stored_light_chroma(chroma: &[LightChroma]) -> Vec<LightChroma> {
+    as_stored_light_rows(&chroma_rows(chroma))
+        .iter()
+        .map(|row| chroma_of_row(row))
+        .collect()
+}
+
+/// Reads what [`write_light_chroma`] wrote into `tables` (which must be there when the flag
+/// says tables follow), for `lights` lights.
+fn read_light_chroma(
+    r: &mut Reader,
+    tables: Option<&mut LightLightness>,
+    lights: usize,
+) -> Parse<()> {
+    if r.u8_at_most(1, "light chroma flag")? == 0 {
+        return Ok(());
+    }
+    let Some(t) = tables else {
+        return Err("light chroma tables without light lightness tables".into());
+    };
+    let rows = read_light_rows(r, lights, 2 * QUANTILES, "light chroma quantile")?;
+    t.chroma = Some(rows.iter().map(|row| chroma_of_row(row)).collect());
+    Ok(())
+}
+
 /// The version 12 light lightness tables ([`LightLightness`]): a flag, then the view (u16) and
 /// one table a light.
 fn write_light_lightness(w: &mut Writer, tables: Option<&LightLightness>) {
@@ -299,6 +356,7 @@ fn read_light_lightness(r: &mut Reader, lights: usize) -> Parse<Option<LightLigh
         view,
         tables,
         spreads: None,
+        chroma: None,
     }))
 }
 
@@ -314,13 +372,18 @@ pub fn light_lightness_bytes(model: &MaterialModel) -> usize {
 }
 
 /// Bytes [`write_light_lightness`] writes for `t` after the flag (the view and the tables),
-/// and [`write_light_spreads`] after its flag.
+/// and [`write_light_spreads`] and [`write_light_chroma`] after theirs.
 fn light_lightness_record_bytes(t: &LightLightness) -> usize {
+    let rows = |columns: usize, lights: usize| columns * (8 + lights);
     let spreads = t
         .spreads
         .as_ref()
-        .map_or(0, |s| LIGHTNESS_BANDS * (8 + s.len()));
-    2 + t.tables.len() * TABLE_BYTES + spreads
+        .map_or(0, |s| rows(LIGHTNESS_BANDS, s.len()));
+    let chroma = t
+        .chroma
+        .as_ref()
+        .map_or(0, |c| rows(2 * QUANTILES, c.len()));
+    2 + t.tables.len() * TABLE_BYTES + spreads + chroma
 }
 
 /// The version 8 lit lightness tables ([`LitMarginals`]): a flag, then one table a subspace
@@ -1034,6 +1097,9 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         }
         read_light_spreads(&mut r, light_lightness.as_mut(), lights.len())?;
     }
+    if version >= 17 {
+        read_light_chroma(&mut r, light_lightness.as_mut(), lights.len())?;
+    }
     r.finish()?;
     MaterialModel::new(MaterialParts {
         views,
@@ -1620,6 +1686,7 @@ mod tests {
                 })
                 .collect(),
             spreads: None,
+            chroma: None,
         };
         let mut w = Writer(Vec::new());
         write_light_lightness(&mut w, Some(&tables));
@@ -1666,6 +1733,7 @@ mod tests {
                 4
             ],
             spreads: Some(stored),
+            chroma: None,
         };
         let mut w = Writer(Vec::new());
         write_light_spreads(&mut w, Some(&tables));
@@ -1688,6 +1756,60 @@ mod tests {
         assert!(e.contains("light band spread"), "{e}");
         let mut none = Writer(Vec::new());
         write_light_spreads(&mut none, None);
+        assert_eq!(none.0, [0]);
+    }
+
+    #[test]
+    fn light_chroma_reads_back_as_stored_in_its_counted_bytes() {
+        // Equal neighbours (a flat tail), steps of different sizes, and a wide range across
+        // the lights, so each quantile's code rounds differently.
+        let chroma: Vec<LightChroma> = (0..6)
+            .map(|l| {
+                let l = l as f32;
+                [
+                    std::array::from_fn(|k| (k.max(4) as f32 - 4.0) * (1.0 + 0.37 * l) - 0.6),
+                    std::array::from_fn(|k| 10.0 + 0.9 * l + 0.013 * (k * k) as f32),
+                ]
+            })
+            .collect();
+        let stored = as_stored_light_chroma(&chroma);
+        for (s, c) in stored.iter().flatten().zip(chroma.iter().flatten()) {
+            assert!(s.windows(2).all(|w| w[0] <= w[1]), "{s:?}");
+            for (a, b) in s.iter().zip(c) {
+                // Half a code: a 255th of the quantile's range over the lights (at most 22.2).
+                assert!((a - b).abs() < 0.05, "{a} vs {b}");
+            }
+        }
+        assert_eq!(as_stored_light_chroma(&stored), stored);
+        let tables = LightLightness {
+            view: 0,
+            tables: vec![
+                LitMarginals {
+                    lightness: vec![0.0; BAND_QUANTILES]
+                };
+                6
+            ],
+            spreads: None,
+            chroma: Some(stored),
+        };
+        let mut w = Writer(Vec::new());
+        write_light_chroma(&mut w, Some(&tables));
+        let without = LightLightness {
+            chroma: None,
+            ..tables.clone()
+        };
+        let record = light_lightness_record_bytes(&tables) - light_lightness_record_bytes(&without);
+        assert_eq!(w.0.len(), 1 + record);
+        let mut read = without.clone();
+        read_light_chroma(&mut Reader::new(&w.0), Some(&mut read), 6).unwrap();
+        assert_eq!(read, tables);
+        // Tables without light lightness, or more lights than the bytes hold: refused.
+        let e = read_light_chroma(&mut Reader::new(&w.0), None, 6).unwrap_err();
+        assert!(e.contains("without light lightness tables"), "{e}");
+        let e = read_light_chroma(&mut Reader::new(&w.0), Some(&mut read), 7).unwrap_err();
+        assert!(e.contains("light chroma quantile"), "{e}");
+        let mut none = Writer(Vec::new());
+        write_light_chroma(&mut none, None);
         assert_eq!(none.0, [0]);
     }
 

@@ -8,7 +8,7 @@ pub use crate::mrf::{AnyLevels, ModelKind};
 pub use error::{ModelError, Result};
 pub use material::{
     BandMarginals, CoarseSource, DeviationCodes, Exemplar, ExemplarChroma, LIGHTNESS_BANDS,
-    LightLightness, LightWeights, LitMarginals, MAX_CHROMA_STEP, MAX_EXEMPLAR_COMPONENTS,
-    MAX_EXEMPLAR_STEP, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES, MaterialModel, MaterialParts,
-    PeriodicPart, Principal, RangeMap, SubspaceModel,
+    LightChroma, LightLightness, LightWeights, LitMarginals, MAX_CHROMA_STEP,
+    MAX_EXEMPLAR_COMPONENTS, MAX_EXEMPLAR_STEP, MAX_PERIOD_COMPONENTS, MAX_TILE_SAMPLES,
+    MaterialModel, MaterialParts, PeriodicPart, Principal, RangeMap, SubspaceModel,
 };

@@ -155,6 +155,15 @@ pub struct Args {
     /// measured lights (seeds 1-4). `render` and `view` do not apply them yet.
     #[arg(long)]
     no_light_tables: bool,
+    /// Do not store, with the light tables, every light's measured a* and b* quantiles (17
+    /// each, a byte a value across the lights: 3.0 KB for 81 lights before deflate; none for
+    /// a grey material). With them, the finished image's a* and b* are mapped onto the
+    /// quantiles blended over the nearest lights, L* kept, and no pixel's chromaticity beyond
+    /// the image's own range: a cluster's lights otherwise share their representative's
+    /// chroma. Measured (built-in materials, 128^2, nine frontal lights): see
+    /// docs/BENCHMARKS.md.
+    #[arg(long)]
+    no_light_chroma: bool,
     /// Do not store every light's own weights on the exemplar's L* deviations (only beside a
     /// range map and an exemplar, off a lattice; a byte a light and deviation, about 0.5 KB for
     /// 81 lights) or, on a lattice beside a range map, on the periods' deviations (about 0.7
@@ -250,10 +259,12 @@ pub struct Args {
     /// creases averaged away; auto keeps the window).
     #[arg(long, value_enum, default_value_t = LayoutChoice::Auto)]
     relief_layout: LayoutChoice,
-    /// Largest model file in bytes (0: no limit). A model above it drops its exemplar's
-    /// principal deviations, the last first (8 KiB each at a 128 x 128 crop), until it fits,
-    /// and says so; of the built-in materials at 20 clusters, the leather's 3D CAR model
-    /// needs it (it drops one of six). Its default is the 150 KB the models are held to.
+    /// Largest model file in bytes (0: no limit). A model above it drops its light chroma
+    /// tables where that alone makes it fit, else its exemplar's principal deviations, the
+    /// last first (8 KiB each at a 128 x 128 crop), until it fits, and says so; of the
+    /// built-in materials at 20 clusters, the leather's 3D CAR model needs it (it drops one of
+    /// six deviations, and its chroma tables). Its default is the 150 KB the models are held
+    /// to.
     #[arg(long, default_value_t = btfmrf::analysis::MODEL_BUDGET)]
     max_bytes: usize,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
@@ -298,6 +309,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         colour_matching: !args.no_colour_matching,
         lit_matching: !args.no_lit_matching,
         light_tables: !args.no_light_tables,
+        light_chroma: !args.no_light_chroma,
         light_weights: !args.no_light_weights,
         max_bytes: (args.max_bytes > 0).then_some(args.max_bytes),
         exemplar_side: args.exemplar,

@@ -137,9 +137,14 @@ fn model_parts(m: &MaterialModel) -> Vec<ModelPart> {
             "light tables",
             format::light_lightness_bytes(m),
             format!(
-                "L* quantiles{} under each of {} lights in view {}",
+                "L* quantiles{}{} under each of {} lights in view {}",
                 if t.spreads.is_some() {
-                    " and detail band spreads"
+                    ", detail band spreads"
+                } else {
+                    ""
+                },
+                if t.chroma.is_some() {
+                    ", a* and b* quantiles"
                 } else {
                     ""
                 },
