@@ -1037,19 +1037,22 @@ fn match_chroma(image: &mut Array3<f32>, wanted: &[Vec<f64>; 2], share: f64) {
         );
         MarginalMap::between(have, &wanted[c], rows * cols)
     });
-    // The range of each coordinate per unit of lightness the image already has.
+    // The range of each coordinate per unit of lightness the image already has (none where
+    // no sampled value is a number: `min` and `max` skip NaN).
     let [range_a, range_b] = [0, 1].map(|c| {
-        sample
+        let (lo, hi) = sample
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), lab| {
                 let v = per_lightness(lab, c);
                 (lo.min(v), hi.max(v))
-            })
+            });
+        (lo <= hi).then_some((lo, hi))
     });
-    let moved = |c: f32, l: f64, map: &MarginalMap, (lo, hi): (f64, f64)| {
+    let moved = |c: f32, l: f64, map: &MarginalMap, range: Option<(f64, f64)>| {
         let v = f64::from(c);
-        let to = v + share * (map.apply(v) - v);
-        chroma_of(chroma_per_lightness(to, l).clamp(lo.min(hi), hi.max(lo)), l) as f32
+        let to = chroma_per_lightness(v + share * (map.apply(v) - v), l);
+        let held = range.map_or(to, |(lo, hi)| to.clamp(lo, hi));
+        chroma_of(held, l) as f32
     };
     let (mut r, mut g, mut b) =
         image.multi_slice_mut((s![0, .., ..], s![1, .., ..], s![2, .., ..]));

@@ -238,12 +238,37 @@ fn read_light_weights(
 /// The version 16 band spreads of the light lightness tables ([`LightLightness::spreads`]): a
 /// flag, then the light rows ([`write_light_rows`]), [`LIGHTNESS_BANDS`] values a light.
 fn write_light_spreads(w: &mut Writer, tables: Option<&LightLightness>) {
-    let Some(spreads) = tables.and_then(|t| t.spreads.as_ref()) else {
+    write_flagged_light_rows(w, tables.and_then(|t| t.spreads.as_deref()));
+}
+
+/// A flag, then the light rows ([`write_light_rows`]) where there are `rows`.
+fn write_flagged_light_rows<R: AsRef<[f32]>>(w: &mut Writer, rows: Option<&[R]>) {
+    let Some(rows) = rows else {
         w.u8(0);
         return;
     };
     w.u8(1);
-    write_light_rows(w, spreads);
+    write_light_rows(w, rows);
+}
+
+/// Reads what [`write_flagged_light_rows`] wrote, `columns` values for each of `lights`
+/// lights, and hands the rows to `store` with `tables`, the light lightness tables they
+/// belong to (which must be there when the flag says rows follow).
+fn read_flagged_light_rows(
+    r: &mut Reader,
+    tables: Option<&mut LightLightness>,
+    (lights, columns): (usize, usize),
+    what: &str,
+    store: impl FnOnce(&mut LightLightness, Vec<Vec<f32>>),
+) -> Parse<()> {
+    if r.u8_at_most(1, &format!("{what} flag"))? == 0 {
+        return Ok(());
+    }
+    let Some(t) = tables else {
+        return Err(format!("{what}s without light lightness tables"));
+    };
+    store(t, read_light_rows(r, lights, columns, what)?);
+    Ok(())
 }
 
 /// Reads what [`write_light_spreads`] wrote into `tables` (which must be there when the flag
@@ -253,19 +278,14 @@ fn read_light_spreads(
     tables: Option<&mut LightLightness>,
     lights: usize,
 ) -> Parse<()> {
-    if r.u8_at_most(1, "light spreads flag")? == 0 {
-        return Ok(());
-    }
-    let Some(t) = tables else {
-        return Err("light band spreads without light lightness tables".into());
-    };
-    let rows = read_light_rows(r, lights, LIGHTNESS_BANDS, "light band spread")?;
-    t.spreads = Some(
-        rows.into_iter()
-            .map(|row| std::array::from_fn(|k| row[k]))
-            .collect(),
-    );
-    Ok(())
+    let shape = (lights, LIGHTNESS_BANDS);
+    read_flagged_light_rows(r, tables, shape, "light band spread", |t, rows| {
+        t.spreads = Some(
+            rows.into_iter()
+                .map(|row| std::array::from_fn(|k| row[k]))
+                .collect(),
+        );
+    })
 }
 
 /// The version 17 chroma tables of the light lightness tables ([`LightLightness::chroma`]): a
@@ -273,12 +293,8 @@ fn read_light_spreads(
 /// quantiles. Stored by quantile across the lights, a byte a value: each quantile's range
 /// over the lights is far narrower than a table's range.
 fn write_light_chroma(w: &mut Writer, tables: Option<&LightLightness>) {
-    let Some(chroma) = tables.and_then(|t| t.chroma.as_ref()) else {
-        w.u8(0);
-        return;
-    };
-    w.u8(1);
-    write_light_rows(w, &chroma_rows(chroma));
+    let rows = tables.and_then(|t| t.chroma.as_deref()).map(chroma_rows);
+    write_flagged_light_rows(w, rows.as_deref());
 }
 
 /// A light's chroma tables as one row of values (a* then b*).
@@ -313,15 +329,10 @@ fn read_light_chroma(
     tables: Option<&mut LightLightness>,
     lights: usize,
 ) -> Parse<()> {
-    if r.u8_at_most(1, "light chroma flag")? == 0 {
-        return Ok(());
-    }
-    let Some(t) = tables else {
-        return Err("light chroma tables without light lightness tables".into());
-    };
-    let rows = read_light_rows(r, lights, 2 * QUANTILES, "light chroma quantile")?;
-    t.chroma = Some(rows.iter().map(|row| chroma_of_row(row)).collect());
-    Ok(())
+    let shape = (lights, 2 * QUANTILES);
+    read_flagged_light_rows(r, tables, shape, "light chroma quantile", |t, rows| {
+        t.chroma = Some(rows.iter().map(|row| chroma_of_row(row)).collect());
+    })
 }
 
 /// The version 12 light lightness tables ([`LightLightness`]): a flag, then the view (u16) and
