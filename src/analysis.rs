@@ -74,13 +74,14 @@ pub struct AnalysisOptions {
     /// ([`crate::model::LightChroma`]). None for a material whose chroma varies less than
     /// the visible range under every light. Default: true.
     pub light_chroma: bool,
-    /// Beside a range map and an exemplar (not on a lattice), store every light's own weights
-    /// on the exemplar's L* deviations, its crop in the registered view projected on them
-    /// (a byte a light and deviation), and count those crops in the deviations: a light's
-    /// de-shaded detail (its cast shadows and highlights) then replaces its cluster
-    /// representative's ([`crate::model::LightWeights`]). On a lattice beside a range map,
-    /// every light's mean period projected on the periods' deviations likewise
-    /// ([`crate::model::PeriodicPart::light_weights`]). Default: true.
+    /// Beside a range map and an exemplar, store every light's own weights on the exemplar's
+    /// L* deviations, its crop in the registered view projected on them (a byte a light and
+    /// deviation), and count those crops in the deviations: a light's de-shaded detail (its
+    /// cast shadows and highlights) then replaces its cluster representative's
+    /// ([`crate::model::LightWeights`]). On a lattice beside a range map, every light's mean
+    /// period projected on the periods' deviations likewise
+    /// ([`crate::model::PeriodicPart::light_weights`]), and its exemplar crop is of its image
+    /// over that period (the stochastic ratio the subspace images' crops hold). Default: true.
     pub light_weights: bool,
     /// Largest model file, bytes as written (deflated); `None`: no limit. A model above it
     /// drops its light chroma tables where that alone makes it fit, else its exemplar's
@@ -518,20 +519,33 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
         None => None,
     };
     // Every light of the registered view keeps its own crop's weights on the exemplar's
-    // deviations (off a lattice, where the crops are de-shaded only in that view).
-    let light_crops = match (crop, &range_map, &periodic) {
-        (Some(c), Some(_), None) if options.light_weights => Some(LightCrops {
-            view: frontal,
-            fields: (0..btf.lights().len())
+    // deviations. On a lattice the crops, like the subspace images', are of the stochastic
+    // ratio: the light's image over its own period. Measured (knit, 128^2, x the another-crop
+    // level): without them x3.65 / 3.63 / 3.64 / 3.67 at the nine measured frontal lights
+    // (seeds 1-4) and x3.68 / 3.66 halfway between them (seeds 1-2); with them x3.47 / 3.44 /
+    // 3.48 / 3.52 and x3.55 / 3.55 (docs/BENCHMARKS.md).
+    let light_crops = match (crop, &range_map) {
+        (Some(c), Some(_)) if options.light_weights => {
+            let lights = btf.lights().len();
+            let fields = (0..lights)
                 .into_par_iter()
                 .map(|l| {
-                    let image = deshaded(btf.image(frontal, l)?, frontal, l, false);
-                    Ok(c.cut(&ColourSpace::Lab.planes(&image)[0])
-                        .into_iter()
-                        .collect())
+                    let mut image = deshaded(btf.image(frontal, l)?, frontal, l, all_views);
+                    if let Some(p) = &periodic {
+                        let Some(tile) = p.light_tile(l) else {
+                            return Ok(None);
+                        };
+                        divide_by_period(&mut image, &tile, &p.lattice);
+                    }
+                    let crop = c.cut(&ColourSpace::Lab.planes(&image)[0]);
+                    Ok(Some(crop.into_iter().collect()))
                 })
-                .collect::<Result<Vec<_>>>()?,
-        }),
+                .collect::<Result<Option<Vec<_>>>>()?;
+            fields.map(|fields| LightCrops {
+                view: frontal,
+                fields,
+            })
+        }
         _ => None,
     };
     progress.start("fitting models", clustering.clusters() as u64);
@@ -546,8 +560,10 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
             }
         });
         let mut image = deshaded(measured, v, l, all_views);
-        if let Some(p) = &periodic {
-            divide_by_period(&mut image, p, k);
+        if let Some(p) = &periodic
+            && let Some(tile) = p.tile(k)
+        {
+            divide_by_period(&mut image, &tile, &p.lattice);
         }
         let lab_crop = crop.map(|c| ColourSpace::Lab.planes(&image).map(|p| c.cut(&p)));
         let (subspace, notes) = options.kind.visit(FitSubspace {
@@ -1334,21 +1350,19 @@ fn principal(
 /// of a weave would otherwise turn their noise into huge ratios.
 const PERIOD_FLOOR: f64 = 0.05;
 
-/// Replaces `image` (linear RGB) by its luminance over that of subspace `k`'s period in `part`
-/// (tiled over it), grey. The ratio is grey because a per-channel ratio turned every
-/// misregistered thread edge (a red pixel over a cream mean) into a colour speck at synthesis;
-/// the colour comes from the period, the MRF adds the brightness variation around it.
-fn divide_by_period(image: &mut Array3<f32>, part: &PeriodicPart, k: usize) {
-    let Some(tile) = part.tile(k) else {
-        return;
-    };
+/// Replaces `image` (linear RGB) by its luminance over that of the period `tile` (3, rows,
+/// cols, tiled over it on `lattice`), grey. The ratio is grey because a per-channel ratio
+/// turned every misregistered thread edge (a red pixel over a cream mean) into a colour speck
+/// at synthesis; the colour comes from the period, the MRF adds the brightness variation
+/// around it.
+fn divide_by_period(image: &mut Array3<f32>, tile: &Array3<f64>, lattice: &Lattice) {
     let (_, h, w) = image.dim();
     // Luminance is linear, so the period's luminance laid on the lattice is the luminance of
     // the laid period: one plane to lay, not three.
     let y_period = relight::luminance(&tile.mapv(|v| v as f32));
     let (y_image, y_tile) = (
         relight::luminance(image),
-        lattice::tiled(&y_period, &part.lattice, h, w),
+        lattice::tiled(&y_period, lattice, h, w),
     );
     let floor = PERIOD_FLOOR * y_tile.mean().unwrap_or(0.0) + f64::from(f32::MIN_POSITIVE);
     let mut ratio = clamp_log_tails(&y_image / &y_tile.mapv(|t| t.max(floor)));

@@ -681,13 +681,22 @@ impl MaterialModel {
         if let Some(factor) = self.light_period(o, view, light)? {
             out.zip_mut_with(&factor, |v, &f| *v = (f64::from(*v) * f) as f32);
         }
-        if let Some(detail) = self.light_detail(cache, view, light)? {
+        let detail = self.light_detail(cache, view, light)?;
+        if let Some(detail) = &detail
+            && let Some(e) = self.exemplar().filter(|_| self.periodic().is_some())
+        {
+            // On a lattice the exemplar holds the L* of the stochastic ratio, which the tile
+            // multiplies: the lights' own detail scales each pixel as it would the ratio at
+            // its mean lightness (chromaticity kept), and the colour tables, which are the
+            // ratio's, are not matched again.
+            scale_pixels(&mut out, &ratio_detail_factor(detail, e.mean_lightness()));
+        } else if let Some(detail) = &detail {
             // Chromaticity kept, as a shadow darkens; the colours then go back to the
             // leading cluster's joint distribution, which the subspace image had before the
             // detail changed (without it the built-in leather's b* spread grew 20 %), and to
             // its lit lightness (the subspace image's last step, which the transfer undoes);
             // the pairs' gains scale them as they scaled the blend.
-            shift_lightness(&mut out, &detail);
+            shift_lightness(&mut out, detail);
             if let Some((&k, _)) = weights.iter().max_by(|a, b| a.1.total_cmp(b.1))
                 && let Some(c) = &self.subspaces()[k].colour_marginals
             {
@@ -1090,6 +1099,14 @@ fn luminance_ratio(y: f64, wanted: f64) -> f64 {
     if y > LIT_DARK { target / y } else { 1.0 }
 }
 
+/// The luminance factor that adds `detail` (L* units) to a ratio of lightness `mean`:
+/// `Y(mean + d) / Y(mean)` per pixel.
+fn ratio_detail_factor(detail: &Array2<f64>, mean: f64) -> Array2<f64> {
+    let y = |l: f64| f64::from(crate::color::luminance_of_lightness(l as f32));
+    let base = y(mean).max(LIT_DARK);
+    detail.mapv(|d| y(mean + d) / base)
+}
+
 /// Multiplies every channel of `image` by `ratio`, pixel by pixel.
 fn scale_pixels(image: &mut Array3<f32>, ratio: &Array2<f64>) {
     image
@@ -1345,6 +1362,18 @@ pub fn relief_factor(
 mod tests {
     use super::*;
     use crate::model::LitMarginals;
+
+    #[test]
+    fn a_ratio_at_its_mean_lightness_moves_by_the_detail() {
+        let detail = Array2::from_shape_vec((1, 4), vec![-12.0, -2.5, 0.0, 7.5]).unwrap();
+        let mean = 61.0;
+        let factor = ratio_detail_factor(&detail, mean);
+        let y = crate::color::luminance_of_lightness(mean as f32);
+        for (d, f) in detail.iter().zip(&factor) {
+            let moved = f64::from(crate::color::lightness(y * *f as f32));
+            assert!((moved - (mean + d)).abs() < 1e-3, "{d}: {moved}");
+        }
+    }
 
     #[test]
     fn bands_finer_than_the_samples_are_left_alone() {

@@ -1,7 +1,7 @@
 //! The periodic part of near-regular materials (issue 11): the knit keeps its weave with the
 //! generator's period, plain and tileable, and its fibres on their own threads; stochastic
 //! materials are left alone; models with the part round-trip through the file and synthesize
-//! the same bytes after it; every frontal light keeps its own period.
+//! the same bytes after it; every frontal light keeps its own period and detail.
 
 use std::path::Path;
 
@@ -253,11 +253,12 @@ fn a_frontal_representative_is_given_up_only_for_a_better_one() {
 }
 
 #[test]
-fn every_light_brings_its_own_period() {
-    // A cluster shares one subspace image, and so one period, among lights whose cast
-    // shadows and shading differ (on the built-in knit the frontal 75/195 light was
-    // represented by view 45 under 75/180); each light's own weights on the periods'
-    // deviations bring its own period back.
+fn every_light_brings_its_own_period_and_detail() {
+    // A cluster shares one subspace image, and so one period and one stochastic ratio, among
+    // lights whose cast shadows and shading differ (on the built-in knit the frontal 75/195
+    // light was represented by view 45 under 75/180); each light's own weights on the
+    // periods' deviations bring its own period back, and its weights on the exemplar's
+    // deviations the brightness around that period (the fibres' shading and highlights).
     let side = 128;
     let knit = Btf::synthetic(SyntheticMaterial::Knit, side, 5).unwrap();
     let another = Btf::synthetic(SyntheticMaterial::Knit, side, 6).unwrap();
@@ -272,7 +273,11 @@ fn every_light_brings_its_own_period() {
     let weights = own.periodic().and_then(|p| p.light_weights.as_ref());
     assert_eq!(weights.map(|w| w.weights.len()), Some(knit.lights().len()));
     assert!(shared.periodic().is_some_and(|p| p.light_weights.is_none()));
+    let detail = own.exemplar().and_then(|e| e.light_weights.as_ref());
+    assert_eq!(detail.map(|w| w.weights.len()), Some(knit.lights().len()));
+    assert!(shared.exemplar().is_some_and(|e| e.light_weights.is_none()));
     let ratio = common::judged_ratio(&knit, &another, [&own, &shared], ["own", "shared"], 1);
+    // Measured: 0.918 with the lights' own periods alone, 0.871 with their detail too.
     println!("own over shared: {ratio:.3}");
-    assert!(ratio < 0.97, "own over shared {ratio:.3}");
+    assert!(ratio < 0.9, "own over shared {ratio:.3}");
 }

@@ -32,9 +32,10 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// version 9 files (no cast shadows), version 10 files (an exemplar's coarse variation
 /// always the MRF's), version 11 files (no light lightness tables), version 12 files (no
 /// chroma spreads), version 13 files (an exemplar at every texel), version 14 files (no
-/// light weights on the exemplar), version 15 files (no light weights on the periods) and
-/// version 16 files (no light chroma tables) are still read.
-pub const VERSION: u16 = 17;
+/// light weights on the exemplar), version 15 files (no light weights on the periods),
+/// version 16 files (no light chroma tables) and version 17 files (no exemplar light weights
+/// on a lattice) are still read.
+pub const VERSION: u16 = 18;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.

@@ -284,8 +284,14 @@ impl Principal {
 
     /// Subspace `k`'s field: the mean plus its weighted deviations.
     pub fn combined(&self, k: usize) -> Option<Vec<f64>> {
+        self.combined_with(self.weights.get(k)?)
+    }
+
+    /// The mean plus the deviations with `weights` (one a deviation; missing ones are 0).
+    pub fn combined_with(&self, weights: &[f32]) -> Option<Vec<f64>> {
         let mut field = vec![0.0; self.basis.first()?.len()];
-        for (c, b) in self.coefficients(k)?.into_iter().zip(&self.basis) {
+        let coefficients = std::iter::once(1.0).chain(weights.iter().map(|&w| f64::from(w)));
+        for (c, b) in coefficients.zip(&self.basis) {
             for (f, &v) in field.iter_mut().zip(b) {
                 *f += c * f64::from(v);
             }
@@ -340,8 +346,19 @@ impl PeriodicPart {
     /// Subspace `k`'s period as (3, rows, cols), linear RGB: the exponential of the mean plus
     /// its weighted deviations (stored as logarithms).
     pub fn tile(&self, k: usize) -> Option<Array3<f64>> {
-        let tile = self.periods.combined(k)?;
-        Array3::from_shape_vec((3, self.rows, self.cols), tile)
+        self.tile_of(self.periods.combined(k)?)
+    }
+
+    /// Measured light `l`'s own period in the light weights' view, as [`PeriodicPart::tile`]
+    /// gives a subspace's; `None` without light weights.
+    pub fn light_tile(&self, l: usize) -> Option<Array3<f64>> {
+        let weights = self.light_weights.as_ref()?.weights.get(l)?;
+        self.tile_of(self.periods.combined_with(weights)?)
+    }
+
+    /// A period's logarithms as linear RGB, (3, rows, cols).
+    fn tile_of(&self, logarithms: Vec<f64>) -> Option<Array3<f64>> {
+        Array3::from_shape_vec((3, self.rows, self.cols), logarithms)
             .ok()
             .map(|t| t.mapv(f64::exp))
     }
@@ -513,6 +530,13 @@ impl ExemplarChroma {
 }
 
 impl Exemplar {
+    /// The mean L* of the mean crop (0 without one).
+    pub fn mean_lightness(&self) -> f64 {
+        self.lightness.basis.first().map_or(0.0, |b| {
+            b.iter().map(|&v| f64::from(v)).sum::<f64>() / b.len().max(1) as f64
+        })
+    }
+
     /// Basis field `j` (0: the mean crop, then the deviations) as a (rows, cols) plane.
     pub fn plane(&self, j: usize) -> Option<Array2<f64>> {
         let b = self.lightness.basis.get(j)?;

@@ -165,15 +165,16 @@ pub struct Args {
     #[arg(long)]
     no_light_chroma: bool,
     /// Do not store every light's own weights on the exemplar's L* deviations (only beside a
-    /// range map and an exemplar, off a lattice; a byte a light and deviation, about 0.5 KB for
-    /// 81 lights) or, on a lattice beside a range map, on the periods' deviations (about 0.7
-    /// KB). With them, the image under a light of the view the range map is registered
-    /// with gets that light's own exemplar detail (its cast shadows, highlights and what the
-    /// relief's shading leaves) or period instead of its cluster representative's, and the
-    /// exemplar crops count in the deviations (together as much as the subspace images' crops;
-    /// more deviations may be kept). Costs analysis one read and de-shading of every light's
-    /// image in that view, and synthesis a second colour transfer for each image of that view
-    /// (for the periods, one more pass over the image).
+    /// range map and an exemplar; a byte a light and deviation, about 0.5 KB for 81 lights)
+    /// and, on a lattice beside a range map, on the periods' deviations (about 0.7 KB). With
+    /// them, the image under a light of the view the range map is registered with gets that
+    /// light's own exemplar detail (its cast shadows, highlights and what the relief's shading
+    /// leaves; on a lattice, of the brightness around the light's own period) and period
+    /// instead of its cluster representative's, and the exemplar crops count in the deviations
+    /// (together as much as the subspace images' crops; more deviations may be kept). Costs
+    /// analysis one read and de-shading of every light's image in that view, and synthesis a
+    /// second colour transfer for each image of that view (on a lattice, two more passes over
+    /// the image instead).
     #[arg(long)]
     no_light_weights: bool,
     /// Largest side of the structure exemplar (pixels; 0: none): the L* of a centred crop of
