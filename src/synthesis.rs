@@ -1100,9 +1100,9 @@ fn luminance_ratio(y: f64, wanted: f64) -> f64 {
 }
 
 /// The luminance factor that adds `detail` (L* units) to a ratio of lightness `mean`:
-/// `Y(mean + d) / Y(mean)` per pixel.
+/// `Y(mean + d) / Y(mean)` per pixel (0 where `mean + d` is not above black).
 fn ratio_detail_factor(detail: &Array2<f64>, mean: f64) -> Array2<f64> {
-    let y = |l: f64| f64::from(crate::color::luminance_of_lightness(l as f32));
+    let y = |l: f64| f64::from(crate::color::luminance_of_lightness(l.max(0.0) as f32));
     let base = y(mean).max(LIT_DARK);
     detail.mapv(|d| y(mean + d) / base)
 }
@@ -1373,6 +1373,9 @@ mod tests {
             let moved = f64::from(crate::color::lightness(y * *f as f32));
             assert!((moved - (mean + d)).abs() < 1e-3, "{d}: {moved}");
         }
+        // Detail that would take the ratio below black (a hostile file's) darkens to black.
+        let below = Array2::from_elem((1, 1), -80.0);
+        assert_eq!(ratio_detail_factor(&below, mean)[[0, 0]], 0.0);
     }
 
     #[test]
