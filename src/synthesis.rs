@@ -681,35 +681,37 @@ impl MaterialModel {
         if let Some(factor) = self.light_period(o, view, light)? {
             out.zip_mut_with(&factor, |v, &f| *v = (f64::from(*v) * f) as f32);
         }
-        let detail = self.light_detail(cache, view, light)?;
-        if let Some(detail) = &detail
-            && let Some(e) = self.exemplar().filter(|_| self.periodic().is_some())
-        {
+        let lattice_exemplar = self.exemplar().filter(|_| self.periodic().is_some());
+        match (self.light_detail(cache, view, light)?, lattice_exemplar) {
+            (None, _) => {}
             // On a lattice the exemplar holds the L* of the stochastic ratio, which the tile
             // multiplies: the lights' own detail scales each pixel as it would the ratio at
             // its mean lightness (chromaticity kept), and the colour tables, which are the
             // ratio's, are not matched again.
-            scale_pixels(&mut out, &ratio_detail_factor(detail, e.mean_lightness()));
-        } else if let Some(detail) = &detail {
-            // Chromaticity kept, as a shadow darkens; the colours then go back to the
-            // leading cluster's joint distribution, which the subspace image had before the
-            // detail changed (without it the built-in leather's b* spread grew 20 %), and to
-            // its lit lightness (the subspace image's last step, which the transfer undoes);
-            // the pairs' gains scale them as they scaled the blend.
-            shift_lightness(&mut out, detail);
-            if let Some((&k, _)) = weights.iter().max_by(|a, b| a.1.total_cmp(b.1))
-                && let Some(c) = &self.subspaces()[k].colour_marginals
-            {
-                let mut planes = ColourSpace::Lab.planes(&out);
-                c.transfer(&mut planes, o.border(), ColourSpace::Lab);
-                out = ColourSpace::Lab.linear_image(&planes);
-                if let Some(heights) = &cache.heights {
-                    self.match_lit(k, &mut out, heights, o.edges());
-                }
-                let plain: f64 = self.weights_by_cluster(view, light, false)?.values().sum();
-                let gain = weights.values().sum::<f64>() / plain;
-                if gain.is_finite() && gain > 0.0 {
-                    out.mapv_inplace(|v| v * gain as f32);
+            (Some(detail), Some(e)) => {
+                scale_pixels(&mut out, &ratio_detail_factor(&detail, e.mean_lightness()));
+            }
+            (Some(detail), None) => {
+                // Chromaticity kept, as a shadow darkens; the colours then go back to the
+                // leading cluster's joint distribution, which the subspace image had before the
+                // detail changed (without it the built-in leather's b* spread grew 20 %), and to
+                // its lit lightness (the subspace image's last step, which the transfer undoes);
+                // the pairs' gains scale them as they scaled the blend.
+                shift_lightness(&mut out, &detail);
+                if let Some((&k, _)) = weights.iter().max_by(|a, b| a.1.total_cmp(b.1))
+                    && let Some(c) = &self.subspaces()[k].colour_marginals
+                {
+                    let mut planes = ColourSpace::Lab.planes(&out);
+                    c.transfer(&mut planes, o.border(), ColourSpace::Lab);
+                    out = ColourSpace::Lab.linear_image(&planes);
+                    if let Some(heights) = &cache.heights {
+                        self.match_lit(k, &mut out, heights, o.edges());
+                    }
+                    let plain: f64 = self.weights_by_cluster(view, light, false)?.values().sum();
+                    let gain = weights.values().sum::<f64>() / plain;
+                    if gain.is_finite() && gain > 0.0 {
+                        out.mapv_inplace(|v| v * gain as f32);
+                    }
                 }
             }
         }
@@ -1100,11 +1102,11 @@ fn luminance_ratio(y: f64, wanted: f64) -> f64 {
 }
 
 /// The luminance factor that adds `detail` (L* units) to a ratio of lightness `mean`:
-/// `Y(mean + d) / Y(mean)` per pixel (0 where `mean + d` is not above black).
+/// `Y(mean + d) / Y(mean)` per pixel ([`luminance_ratio`]; 0 where `mean + d` is not above
+/// black).
 fn ratio_detail_factor(detail: &Array2<f64>, mean: f64) -> Array2<f64> {
-    let y = |l: f64| f64::from(crate::color::luminance_of_lightness(l.max(0.0) as f32));
-    let base = y(mean).max(LIT_DARK);
-    detail.mapv(|d| y(mean + d) / base)
+    let base = f64::from(crate::color::luminance_of_lightness(mean.max(0.0) as f32));
+    detail.mapv(|d| luminance_ratio(base, (mean + d).max(0.0)))
 }
 
 /// Multiplies every channel of `image` by `ratio`, pixel by pixel.

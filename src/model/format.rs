@@ -1737,38 +1737,67 @@ mod tests {
             .map(|r| std::array::from_fn(|k| r[k]))
             .collect();
         let tables = LightLightness {
+            spreads: Some(stored),
+            ..zero_light_tables(4)
+        };
+        let without = LightLightness {
+            spreads: None,
+            ..tables.clone()
+        };
+        let rows = FlaggedRows {
+            write: write_light_spreads,
+            read: read_light_spreads,
+            what: "light band spread",
+        };
+        rows.assert_round_trip(&tables, without);
+    }
+
+    /// Light lightness tables of `lights` lights, all zero, with neither spreads nor chroma.
+    fn zero_light_tables(lights: usize) -> LightLightness {
+        LightLightness {
             view: 0,
             tables: vec![
                 LitMarginals {
                     lightness: vec![0.0; BAND_QUANTILES]
                 };
-                4
+                lights
             ],
-            spreads: Some(stored),
-            chroma: None,
-        };
-        let mut w = Writer(Vec::new());
-        write_light_spreads(&mut w, Some(&tables));
-        let record = light_lightness_record_bytes(&tables)
-            - light_lightness_record_bytes(&LightLightness {
-                spreads: None,
-                ..tables.clone()
-            });
-        assert_eq!(w.0.len(), 1 + record);
-        let mut read = LightLightness {
             spreads: None,
-            ..tables.clone()
-        };
-        read_light_spreads(&mut Reader::new(&w.0), Some(&mut read), 4).unwrap();
-        assert_eq!(read, tables);
-        // Spreads without tables, or more lights than the bytes hold: refused.
-        let e = read_light_spreads(&mut Reader::new(&w.0), None, 4).unwrap_err();
-        assert!(e.contains("without light lightness tables"), "{e}");
-        let e = read_light_spreads(&mut Reader::new(&w.0), Some(&mut read), 5).unwrap_err();
-        assert!(e.contains("light band spread"), "{e}");
-        let mut none = Writer(Vec::new());
-        write_light_spreads(&mut none, None);
-        assert_eq!(none.0, [0]);
+            chroma: None,
+        }
+    }
+
+    /// A flagged record of light rows beside the light lightness tables: its writer, its
+    /// reader and the name its errors give.
+    struct FlaggedRows {
+        write: fn(&mut Writer, Option<&LightLightness>),
+        read: fn(&mut Reader, Option<&mut LightLightness>, usize) -> Parse<()>,
+        what: &'static str,
+    }
+
+    impl FlaggedRows {
+        /// The record of `tables` takes the bytes `light_lightness_record_bytes` counts for
+        /// it beyond `without` (the same tables without the record) and its flag, and reads
+        /// back into `without` as `tables`; rows without light lightness tables, or for more
+        /// lights than the bytes hold, are refused; no rows write one zero byte.
+        fn assert_round_trip(&self, tables: &LightLightness, without: LightLightness) {
+            let lights = tables.tables.len();
+            let mut w = Writer(Vec::new());
+            (self.write)(&mut w, Some(tables));
+            let record =
+                light_lightness_record_bytes(tables) - light_lightness_record_bytes(&without);
+            assert_eq!(w.0.len(), 1 + record);
+            let mut read = without;
+            (self.read)(&mut Reader::new(&w.0), Some(&mut read), lights).unwrap();
+            assert_eq!(&read, tables);
+            let e = (self.read)(&mut Reader::new(&w.0), None, lights).unwrap_err();
+            assert!(e.contains("without light lightness tables"), "{e}");
+            let e = (self.read)(&mut Reader::new(&w.0), Some(&mut read), lights + 1).unwrap_err();
+            assert!(e.contains(self.what), "{e}");
+            let mut none = Writer(Vec::new());
+            (self.write)(&mut none, None);
+            assert_eq!(none.0, [0]);
+        }
     }
 
     #[test]
@@ -1794,35 +1823,19 @@ mod tests {
         }
         assert_eq!(as_stored_light_chroma(&stored), stored);
         let tables = LightLightness {
-            view: 0,
-            tables: vec![
-                LitMarginals {
-                    lightness: vec![0.0; BAND_QUANTILES]
-                };
-                6
-            ],
-            spreads: None,
             chroma: Some(stored),
+            ..zero_light_tables(6)
         };
-        let mut w = Writer(Vec::new());
-        write_light_chroma(&mut w, Some(&tables));
         let without = LightLightness {
             chroma: None,
             ..tables.clone()
         };
-        let record = light_lightness_record_bytes(&tables) - light_lightness_record_bytes(&without);
-        assert_eq!(w.0.len(), 1 + record);
-        let mut read = without.clone();
-        read_light_chroma(&mut Reader::new(&w.0), Some(&mut read), 6).unwrap();
-        assert_eq!(read, tables);
-        // Tables without light lightness, or more lights than the bytes hold: refused.
-        let e = read_light_chroma(&mut Reader::new(&w.0), None, 6).unwrap_err();
-        assert!(e.contains("without light lightness tables"), "{e}");
-        let e = read_light_chroma(&mut Reader::new(&w.0), Some(&mut read), 7).unwrap_err();
-        assert!(e.contains("light chroma quantile"), "{e}");
-        let mut none = Writer(Vec::new());
-        write_light_chroma(&mut none, None);
-        assert_eq!(none.0, [0]);
+        let rows = FlaggedRows {
+            write: write_light_chroma,
+            read: read_light_chroma,
+            what: "light chroma quantile",
+        };
+        rows.assert_round_trip(&tables, without);
     }
 
     #[test]
