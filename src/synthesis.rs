@@ -14,9 +14,11 @@ use ndarray::{Array2, Array3, Axis, s};
 use rayon::prelude::*;
 
 use crate::btf::{Direction, Weighted};
+use crate::decompose::colour_transfer::ChromaOrigin;
 use crate::decompose::marginals::{self, MarginalMap, QUANTILES, QuantileGrid};
 use crate::decompose::pyramid::{exact_levels, spread};
 use crate::decompose::{Border, ColourSpace, Pyramid};
+use crate::geometry::cells::LaidCells;
 use crate::geometry::integrate::{Edges, normals_of, normals_of_periodic};
 use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::parallax;
@@ -101,6 +103,9 @@ struct LaidExemplar {
     planes: Vec<Array2<f64>>,
     /// How many of `planes` are L* crops.
     lightness: usize,
+    /// The relief's cells as laid, where one guided the quilt: every output cell's pieces
+    /// take its major piece's mean.
+    cells: Option<LaidCells>,
 }
 
 impl LaidExemplar {
@@ -124,7 +129,11 @@ impl LaidExemplar {
         for (&c, plane) in terms {
             sum.scaled_add(c, plane);
         }
-        self.scale.apply(self.placement.lay(&sum))
+        let mut laid = self.placement.lay(&sum);
+        if let Some(cells) = &self.cells {
+            cells.even_out(&sum, &self.placement, &mut laid);
+        }
+        self.scale.apply(laid)
     }
 }
 
@@ -463,7 +472,7 @@ impl MaterialModel {
                 });
         }
         if let Some(c) = &s.colour_marginals {
-            c.transfer(&mut colours, border, s.kl.space);
+            c.transfer(&mut colours, border, s.kl.space, self.chroma_origin(k));
         }
         let mut image = s.kl.space.linear_image(&colours);
         if let Some(p) = self.periodic()
@@ -480,6 +489,23 @@ impl MaterialModel {
             self.match_lit(k, &mut image, heights, o.edges());
         }
         Ok(image)
+    }
+
+    /// Where subspace image `k`'s chroma comes from: laid from the exemplar's crops with their
+    /// lightness where the exemplar holds chroma for it, else the MRF's.
+    fn chroma_origin(&self, k: usize) -> ChromaOrigin {
+        let laid = self
+            .subspaces()
+            .get(k)
+            .is_some_and(|s| s.kl.space == ColourSpace::Lab)
+            && (self.exemplar())
+                .and_then(|e| e.chroma.as_ref())
+                .is_some_and(|c| c.fields.coefficients(k).is_some());
+        if laid {
+            ChromaOrigin::Laid
+        } else {
+            ChromaOrigin::Independent
+        }
     }
 
     /// Scales each pixel of `image` so that, relit by `heights` for subspace `k`'s
@@ -702,7 +728,12 @@ impl MaterialModel {
                     && let Some(c) = &self.subspaces()[k].colour_marginals
                 {
                     let mut planes = ColourSpace::Lab.planes(&out);
-                    c.transfer(&mut planes, o.border(), ColourSpace::Lab);
+                    c.transfer(
+                        &mut planes,
+                        o.border(),
+                        ColourSpace::Lab,
+                        self.chroma_origin(k),
+                    );
                     out = ColourSpace::Lab.linear_image(&planes);
                     if let Some(heights) = &cache.heights {
                         self.match_lit(k, &mut out, heights, o.edges());
@@ -951,7 +982,8 @@ impl MaterialModel {
     /// The range map's heights ([`MaterialModel::range_heights`], the same values) and the
     /// exemplar's zero-mean basis details from one quilt ([`quilt_laid`]), when the exemplar is
     /// registered with a map sampled at every pixel and no lattice lays the relief: a pit in
-    /// the relief and its dark colour then stay together. `None` otherwise.
+    /// the relief and its dark colour then stay together, and a cell a cut crossed takes one
+    /// mean colour ([`LaidCells`]). `None` otherwise.
     fn laid_together(&self, o: &SynthesisOptions) -> Option<(QuiltedRelief, LaidExemplar)> {
         let (map, e) = (self.range_map()?, self.exemplar()?);
         if map.step != e.step
@@ -961,13 +993,12 @@ impl MaterialModel {
             return None;
         }
         let seed = crate::mrf::noise::mix(o.seed, RANGE_SEED);
-        Some(laid_exemplar(
-            &map.samples(),
-            e,
-            o,
-            (seed, None, false),
-            quilt_laid,
-        ))
+        let samples = map.samples();
+        let (relief, mut laid) = laid_exemplar(&samples, e, o, (seed, None, false), quilt_laid);
+        // At a step the laid samples are the whole torus; at texels, only when tileable.
+        let whole_torus = matches!(laid.scale, Scale::Stepped { .. }) || o.tileable;
+        laid.cells = Some(LaidCells::new(&samples, &laid.placement, whole_torus));
+        Some((relief, laid))
     }
 
     /// How the relief shades `light`: the measured lights' fitted strengths
@@ -1295,6 +1326,7 @@ fn laid_exemplar<R>(
             scale,
             planes,
             lightness: e.lightness.basis.len(),
+            cells: None,
         },
     )
 }

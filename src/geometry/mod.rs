@@ -1,6 +1,7 @@
 //! Surface geometry: normals by photometric stereo, the range map (height field) they
 //! integrate to, its seamless enlargement, and the bump shading it gives under a light.
 
+pub mod cells;
 pub mod integrate;
 pub mod lattice;
 pub mod parallax;

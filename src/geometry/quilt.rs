@@ -334,6 +334,11 @@ impl Placement {
         laid
     }
 
+    /// Per output sample, the row-major index of its source sample.
+    pub(crate) fn from(&self) -> &Array2<u32> {
+        &self.from
+    }
+
     /// The source's shape (rows, cols).
     pub fn source(&self) -> (usize, usize) {
         self.source
