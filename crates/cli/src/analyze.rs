@@ -127,7 +127,10 @@ pub struct Args {
     /// and the chroma's spread per pyramid band (1,000 bytes a subspace image) that move
     /// every synthesized image's colours towards the measured joint colour distribution and
     /// chroma spectrum; without them the independently synthesized colour factors combine
-    /// into colours the material never shows (saturated specks on dark pixels).
+    /// into colours the material never shows (saturated specks on dark pixels). Beside a
+    /// range map, whose light tables give every light its measured chroma, analysis keeps
+    /// them only where the judge finds the model closer with them (one more judged
+    /// synthesis per judged light).
     #[arg(long)]
     no_colour_matching: bool,
     /// Do not store the measured lightness of each subspace image's representative with its

@@ -383,8 +383,9 @@ fn info_describes_a_model_file() {
         text.contains("2dcar model (.btfm)") && text.contains("lights: 81"),
         "{text}"
     );
-    // The optional parts, each with what it holds; the leather's exemplar takes its coarse
-    // L* from the laid crops (analysis chose it, models/README.md).
+    // The optional parts, each with what it holds: analysis judged the stones closer without
+    // the colour tables (their per-light chroma tables give the colours), the leather with
+    // them (models/README.md).
     let parts = |info: &serde_json::Value| -> Vec<String> {
         info["parts"]
             .as_array()
@@ -393,6 +394,14 @@ fn info_describes_a_model_file() {
             .map(|p| p["part"].as_str().unwrap().to_string())
             .collect()
     };
+    assert_eq!(
+        parts(&info),
+        ["lit tables", "light tables", "exemplar", "range map"],
+        "{info}"
+    );
+    let leather = repo().join("models/leather.btfm");
+    let info: serde_json::Value =
+        serde_json::from_str(&ok(&["info", s(&leather), "--json"])).unwrap();
     assert_eq!(
         parts(&info),
         [
@@ -404,9 +413,6 @@ fn info_describes_a_model_file() {
         ],
         "{info}"
     );
-    let leather = repo().join("models/leather.btfm");
-    let info: serde_json::Value =
-        serde_json::from_str(&ok(&["info", s(&leather), "--json"])).unwrap();
     let exemplar = &info["parts"][3];
     assert!(
         exemplar["holds"]
