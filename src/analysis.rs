@@ -817,12 +817,18 @@ fn judged_exemplar(
         .map(|(m, _)| without_band_spreads(m))
         .collect::<Result<Vec<_>>>()?;
     let models: Vec<&MaterialModel> = judged_models.iter().collect();
-    let distances = judged_distances(btf, &models, judged)?;
-    // Too small to judge: no evidence either way, so the fewest parts.
-    let best = distances
+    let handicaps: Vec<f64> = candidates.iter().map(|c| c.1).collect();
+    let best = closest(judged_distances(btf, &models, judged)?, &handicaps);
+    Ok(candidates.swap_remove(best).0)
+}
+
+/// The index of the closest judged candidate, each distance times its handicap; a tie keeps
+/// the earlier one, and where any is too small to judge (no evidence either way) the first.
+fn closest(distances: Vec<Option<f64>>, handicaps: &[f64]) -> usize {
+    distances
         .into_iter()
-        .zip(&candidates)
-        .map(|(d, (_, handicap))| d.map(|d| d * handicap))
+        .zip(handicaps)
+        .map(|(d, handicap)| d.map(|d| d * handicap))
         .collect::<Option<Vec<f64>>>()
         .and_then(|d| {
             d.iter()
@@ -830,8 +836,7 @@ fn judged_exemplar(
                 .min_by(|a, b| a.1.total_cmp(b.1))
                 .map(|(i, _)| i)
         })
-        .unwrap_or(0);
-    Ok(candidates.swap_remove(best).0)
+        .unwrap_or(0)
 }
 
 /// `model`, or the same without its colour tables where the judge finds that closer to the
@@ -861,12 +866,12 @@ fn judged_colour_tables(
         s.colour_marginals = None;
     }
     let without = MaterialModel::new(parts)?;
-    Ok(
-        match judged_distances(btf, &[&model, &without], judged)?[..] {
-            [Some(with), Some(less)] if less < with => without,
-            _ => model,
-        },
-    )
+    let distances = judged_distances(btf, &[&model, &without], judged)?;
+    Ok(if closest(distances, &[1.0, 1.0]) == 1 {
+        without
+    } else {
+        model
+    })
 }
 
 /// `model` without the band spreads of its light tables, if any.

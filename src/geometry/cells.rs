@@ -37,7 +37,7 @@ impl LaidCells {
         let (source, count) = regions(&raised, false);
         let source: Vec<u32> = source.iter().copied().collect();
         let flags: Vec<bool> = raised.iter().copied().collect();
-        let from = placement.from();
+        let from = placement.sources();
         let (cells, n) = regions(&from.mapv(|i| flags[i as usize]), wrap);
         // Per output cell, the samples each source cell brought to it.
         let mut pieces: Vec<Vec<(u32, usize)>> = vec![Vec::new(); n];
@@ -79,7 +79,7 @@ impl LaidCells {
         let means: Vec<f64> = sums.iter().map(|&(s, n)| s / n.max(1) as f64).collect();
         Zip::from(laid)
             .and(&self.major)
-            .and(placement.from())
+            .and(placement.sources())
             .par_for_each(|v, &m, &i| {
                 *v += means[m as usize] - means[self.source[i as usize] as usize];
             });
@@ -210,7 +210,7 @@ mod tests {
         let (label, n) = regions(&laid_relief.mapv(|v| v > 0.5), false);
         let mut sources = vec![Vec::new(); n];
         Zip::from(&label)
-            .and(placement.from())
+            .and(placement.sources())
             .for_each(|&c, &i| sources[c as usize].push(cells.source[i as usize]));
         let whole = |c: u32| {
             sources[c as usize]

@@ -335,7 +335,7 @@ impl Placement {
     }
 
     /// Per output sample, the row-major index of its source sample.
-    pub(crate) fn from(&self) -> &Array2<u32> {
+    pub(crate) fn sources(&self) -> &Array2<u32> {
         &self.from
     }
 
