@@ -1,13 +1,13 @@
 //! Real captures judged at six of their lights: the setup behind the RTI rows of
 //! docs/BENCHMARKS.md (issue 11). Each capture (a folder with `dirs.lp`, or a photograph) is
-//! analysed at 8 clusters (or `--clusters N`), and its 256^2 synthesis (seed 1) is judged
+//! analysed at 8 clusters (or `--clusters N`), and its 256^2 synthesis (seed 1, or `--seed N`) is judged
 //! against the measured image at six lights spread over the capture's list; the reference
 //! levels come from the measured image itself (`Yardstick::new`: another crop, random phase).
 //! Prints one line per light and, per capture, the mean structure over the random-phase level
 //! and over the another-crop level, and the mean colour distance.
 //!
 //! Run: `cargo run --release --example judge_captures -- CAPTURE... [--clusters N]
-//! [--model KIND] [--no-lit-tables] [--no-light-tables] [--no-light-chroma] [--no-light-weights] [--exemplar N]`, e.g.
+//! [--model KIND] [--seed N] [--no-lit-tables] [--no-light-tables] [--no-light-chroma] [--no-light-weights] [--exemplar N]`, e.g.
 //! `../shared/data/rti/*`; `--exemplar N` sets the exemplar's side (0: none).
 
 use btfmrf::analysis::{AnalysisOptions, analyze};
@@ -26,8 +26,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         clusters: 8,
         ..AnalysisOptions::default()
     };
+    let mut seed = 1;
     while let Some(a) = args.next() {
         match a.as_str() {
+            "--seed" => seed = args.next().ok_or("--seed N")?.parse()?,
             "--clusters" => options.clusters = args.next().ok_or("--clusters N")?.parse()?,
             "--model" => options.kind = args.next().ok_or("--model KIND")?.parse()?,
             "--no-lit-tables" => options.lit_matching = false,
@@ -43,7 +45,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let o = SynthesisOptions {
         rows: 256,
         cols: 256,
-        seed: 1,
+        seed,
         tileable: false,
     };
     for path in captures {

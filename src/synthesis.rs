@@ -24,8 +24,8 @@ use crate::geometry::lattice::{self, Lattice};
 use crate::geometry::parallax;
 use crate::geometry::relight::{SHADING_FLOOR, Shading, shading_factor};
 use crate::geometry::{
-    Phase, Placement, QuiltedRelief, detail_scale, patch_side, quilt, quilt_laid, quilt_placement,
-    resample_periodic, split_detail,
+    CoarseScan, Phase, Placement, QuiltedRelief, coarse_part, detail_scale, patch_side, quilt,
+    quilt_laid, quilt_placement, resample_periodic,
 };
 use crate::model::{
     CoarseSource, Exemplar, LIGHTNESS_BANDS, LightLightness, LightWeights, MaterialModel,
@@ -449,7 +449,7 @@ impl MaterialModel {
                     // built-in stones at 256^2 (x2.46 the another-crop level against x1.71).
                     CoarseSource::Mrf => {
                         let sigma = detail_scale(e.rows, e.cols) * e.step as f64;
-                        laid + split_detail(&offset, sigma, o.tileable).0
+                        laid + coarse_part(&offset, sigma, o.tileable)
                     }
                     CoarseSource::Laid => laid + offset.mean().unwrap_or(0.0),
                 }
@@ -778,7 +778,7 @@ impl MaterialModel {
         Ok(Some(match e.coarse {
             CoarseSource::Mrf => {
                 let sigma = detail_scale(e.rows, e.cols) * e.step as f64;
-                let coarse = split_detail(&detail, sigma, cache.options.tileable).0;
+                let coarse = coarse_part(&detail, sigma, cache.options.tileable);
                 detail - coarse
             }
             CoarseSource::Laid => detail,
@@ -972,9 +972,18 @@ impl MaterialModel {
         } else {
             e.crop(0)?
         };
-        // Only the laid crops are used: the guide's own quilt is not kept.
+        // Only the laid crops are used: the guide's own quilt is not kept. The guide is the
+        // lightness: its chroma judges the shortlist and the cuts only, but on a tileable
+        // torus, whose last patches must fit the first ones on three or four sides, it scans
+        // too (a canvas capture's tileable 3D CAR: the wrap's neighbour correlation 3.1
+        // standard deviations off the interior's with the lightness alone).
+        let scan = if o.tileable {
+            CoarseScan::WithCompanions
+        } else {
+            CoarseScan::GuideAlone
+        };
         let placement_only = |g: &_, p: &_, m: &_, size, seed, phase: Option<&Phase>| {
-            ((), quilt_placement(g, p, m, size, seed, phase))
+            ((), quilt_placement(g, p, m, size, seed, phase, scan))
         };
         Some(laid_exemplar(&guide, e, o, (seed, phase.as_ref(), true), placement_only).1)
     }

@@ -12,8 +12,8 @@ pub mod relight;
 pub use integrate::{frankot_chellappa, integrate_on_torus, normals_of};
 pub use photometric_stereo::{NormalMap, estimate_normals, frontal_view};
 pub use quilt::{
-    Phase, Placement, QuiltedRelief, detail_scale, patch_side, quilt, quilt_laid, quilt_placement,
-    resample_periodic, split_detail,
+    CoarseScan, Phase, Placement, QuiltedRelief, coarse_part, detail_scale, patch_side, quilt,
+    quilt_laid, quilt_placement, resample_periodic, split_detail,
 };
 
 use ndarray::Array2;
