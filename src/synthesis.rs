@@ -414,24 +414,27 @@ impl MaterialModel {
         })?;
         let shapes = Pyramid::shapes(o.rows, o.cols, s.levels.len());
         let border = o.border();
-        // The exemplar's quilt does not depend on the factors: laid while they are drawn.
-        let (factors, laid) = rayon::join(
-            || self.factor_planes(s, &shapes, o, noise),
+        // The exemplar's quilt does not depend on the factors: laid while they are drawn and
+        // turned into colours.
+        let (mut colours, laid) = rayon::join(
+            || {
+                let factors = self.factor_planes(s, &shapes, o, noise);
+                let (factors, maps): (Vec<_>, Vec<_>) = factors.into_iter().unzip();
+                let factors: [Array2<f64>; 3] = factors.try_into().expect("three factors");
+                s.kl.coordinates_mapped(&factors, |f| {
+                    [
+                        maps[0].apply(f[0]),
+                        maps[1].apply(f[1]),
+                        maps[2].apply(f[2]),
+                    ]
+                })
+            },
             || {
                 (s.kl.space == ColourSpace::Lab)
                     .then(|| structure.get_or_init(|| self.exemplar_details(o)).as_ref())
                     .flatten()
             },
         );
-        let (factors, maps): (Vec<_>, Vec<_>) = factors.into_iter().unzip();
-        let factors: [Array2<f64>; 3] = factors.try_into().expect("three factors");
-        let mut colours = s.kl.coordinates_mapped(&factors, |f| {
-            [
-                maps[0].apply(f[0]),
-                maps[1].apply(f[1]),
-                maps[2].apply(f[2]),
-            ]
-        });
         if let Some(e) = self.exemplar()
             && let Some(laid) = laid
         {

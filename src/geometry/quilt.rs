@@ -113,19 +113,10 @@ impl Layout {
 /// An empty source or a zero output size (callers check both).
 pub fn quilt(source: &Array2<f64>, rows: usize, cols: usize, seed: u64) -> Array2<f64> {
     let differences = NeighbourDifferences::zeros(rows, cols);
-    let scan = CoarseScan::WithCompanions;
-    quilt_patches(
-        source,
-        &[],
-        &[],
-        rows,
-        cols,
-        seed,
-        (None, scan),
-        differences,
-    )
-    .0
-    .integrate()
+    let scan = (None, CoarseScan::WithCompanions);
+    quilt_patches(source, &[], &[], (rows, cols), seed, scan, differences)
+        .0
+        .integrate()
 }
 
 /// A lattice the quilt keeps in step (near-regular materials, Haindl and Hatka): its periods
@@ -201,14 +192,14 @@ pub fn quilt_laid(
     phase: Option<&Phase>,
 ) -> (QuiltedRelief, Placement) {
     let differences = NeighbourDifferences::zeros(rows, cols);
+    let scan = (phase, CoarseScan::WithCompanions);
     let (relief, _, placement) = quilt_patches(
         source,
         companions,
         matched,
-        rows,
-        cols,
+        (rows, cols),
         seed,
-        (phase, CoarseScan::WithCompanions),
+        scan,
         differences,
     );
     (relief, placement)
@@ -230,8 +221,7 @@ pub fn quilt_placement(
         source,
         companions,
         matched,
-        rows,
-        cols,
+        (rows, cols),
         seed,
         (phase, scan),
         (),
@@ -405,13 +395,11 @@ impl Placement {
 
 /// [`quilt`], with the index of the patch every sample came from and the [`Placement`] of
 /// every sample (see [`quilt_laid`]); the neighbour differences go to `differences`.
-#[allow(clippy::too_many_arguments)]
 fn quilt_patches<D: Differences>(
     source: &Array2<f64>,
     companions: &[Array2<f64>],
     matched: &[usize],
-    rows: usize,
-    cols: usize,
+    (rows, cols): (usize, usize),
     seed: u64,
     (phase, scan): (Option<&Phase>, CoarseScan),
     mut differences: D,
@@ -1825,8 +1813,7 @@ mod tests {
             &source,
             &[],
             &[],
-            240,
-            200,
+            (240, 200),
             7,
             (None, CoarseScan::WithCompanions),
             NeighbourDifferences::zeros(240, 200),
@@ -1953,8 +1940,7 @@ mod tests {
                 &source,
                 &[],
                 &[],
-                256,
-                256,
+                (256, 256),
                 seed,
                 (None, CoarseScan::WithCompanions),
                 NeighbourDifferences::zeros(256, 256),
@@ -2050,7 +2036,7 @@ mod tests {
             let companions = std::slice::from_ref(&colour);
             let scan = (None, CoarseScan::WithCompanions);
             let (_, patch, placement) =
-                quilt_patches(&source, companions, matched, 150, 130, 4, scan, ());
+                quilt_patches(&source, companions, matched, (150, 130), 4, scan, ());
             neighbour_steps(&Quilt {
                 heights: placement.lay(&colour),
                 patch,

@@ -205,9 +205,9 @@ pub struct Args {
     /// images) took 21 s to analyse against 10 s with --exemplar 0, the 310^2 clay-leaf RTI
     /// capture 37 s (both layouts, see --relief-layout) against 2 s, on a 2-core machine. The quilt costs synthesis time: a 1024x1024 image of
     /// a photograph's model took 0.22-0.28 s with it and 0.08-0.10 s without on a 2-core
-    /// machine for a grey photograph (gravel, medians of 11 calls in two runs), 0.42 s and
-    /// 0.21 s for a colour one (a 334 x 322 painting, medians of 7), whose chroma is drawn,
-    /// laid and matched as well.
+    /// machine for a grey photograph (gravel, medians of 11 calls in two runs), 0.33 s and
+    /// 0.21 s for a colour one (a 334 x 322 painting, medians of 9 and 7), whose chroma is
+    /// drawn, laid and matched as well.
     #[arg(long)]
     exemplar: Option<usize>,
     /// Do not look for a lattice. By default a material that repeats along both image axes (a
