@@ -1782,7 +1782,7 @@ fn choose_layout(heights: &Array2<f64>) -> ReliefLayout {
     let (rows, cols) = (h.div_ceil(whole.step), w.div_ceil(whole.step));
     let window_scale = detail_scale(side.min(h), side.min(w));
     let whole_scale = detail_scale(rows, cols) * whole.step as f64;
-    let coarse = |sigma: f64| geometry::split_detail(heights, sigma, false).0;
+    let coarse = |sigma: f64| geometry::coarse_part(heights, sigma, false);
     let between = (&coarse(window_scale) - &coarse(whole_scale)).var(0.0);
     let finest = geometry::split_detail(heights, whole.step as f64 / 2.0, false)
         .1
