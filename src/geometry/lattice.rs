@@ -50,8 +50,8 @@ pub fn detect(plane: &Array2<f64>) -> Option<Lattice> {
     analyse(plane).and_then(|a| a.lattice())
 }
 
-/// The mean over all whole periods of `plane` (bilinear sampling at the sub-pixel lattice,
-/// phase 0 at pixel (0,0)), sampled on `samples = [rows, cols]` points per period.
+/// The mean over all whole periods of `plane` (cubic sampling at the sub-pixel lattice, phase
+/// 0 at pixel (0,0)), sampled on `samples = [rows, cols]` points per period.
 ///
 /// Sample (s, t) is the mean of the plane at (i p + s p / S, j q + t q / T) over whole periods
 /// i < floor(h / p), j < floor(w / q) (at least one; positions past the last pixel are clamped
@@ -73,18 +73,20 @@ pub fn mean_tile(plane: &Array2<f64>, lattice: &Lattice, samples: [usize; 2]) ->
         let mut sum = 0.0;
         for i in 0..n {
             for j in 0..m {
-                sum += bilinear_clamped(plane, i as f64 * p + dy, j as f64 * q + dx);
+                sum += cubic_clamped(plane, i as f64 * p + dy, j as f64 * q + dx);
             }
         }
         sum / (n * m) as f64
     })
 }
 
-/// `tile` (one period, sampled as mean_tile makes it) laid periodically with bilinear
+/// `tile` (one period, sampled as mean_tile makes it) laid periodically with cubic
 /// interpolation over rows x cols output pixels, with the given periods in output pixels.
 ///
 /// Output pixel (y, x) reads the tile at phase (y mod p, x mod q), interpolating across the
-/// tile's edge into its first sample. An empty tile gives zeros; periods as in [`mean_tile`].
+/// tile's edges (it wraps). The values stay within the tile's range (the cubic's overshoot at
+/// a sharp edge is cut, so a positive tile stays positive). An empty tile gives zeros;
+/// periods as in [`mean_tile`].
 pub fn tiled(tile: &Array2<f64>, lattice: &Lattice, rows: usize, cols: usize) -> Array2<f64> {
     let (s, t) = tile.dim();
     if s == 0 || t == 0 {
@@ -94,14 +96,29 @@ pub fn tiled(tile: &Array2<f64>, lattice: &Lattice, rows: usize, cols: usize) ->
         usable_period(lattice.rows, rows),
         usable_period(lattice.cols, cols),
     );
-    // Per output row and column: the two tile samples and the weight of the second.
-    let row_taps: Vec<(usize, usize, f64)> = (0..rows).map(|y| tap(y, p, s)).collect();
-    let col_taps: Vec<(usize, usize, f64)> = (0..cols).map(|x| tap(x, q, t)).collect();
+    let (lo, hi) = tile
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    // Separable: first every tile row along the output's columns, then down the rows.
+    let col_taps: Vec<Taps> = (0..cols).map(|x| taps(x, q, t)).collect();
+    let across = Array2::from_shape_fn((s, cols), |(r, x)| {
+        let (at, weights) = &col_taps[x];
+        at.iter()
+            .zip(weights)
+            .map(|(&c, w)| w * tile[[r, c]])
+            .sum::<f64>()
+    });
+    let row_taps: Vec<Taps> = (0..rows).map(|y| taps(y, p, s)).collect();
     Array2::from_shape_fn((rows, cols), |(y, x)| {
-        let ((r0, r1, fy), (c0, c1, fx)) = (row_taps[y], col_taps[x]);
-        let top = tile[[r0, c0]] * (1.0 - fx) + tile[[r0, c1]] * fx;
-        let bottom = tile[[r1, c0]] * (1.0 - fx) + tile[[r1, c1]] * fx;
-        top * (1.0 - fy) + bottom * fy
+        let (at, weights) = &row_taps[y];
+        let v: f64 = at
+            .iter()
+            .zip(weights)
+            .map(|(&r, w)| w * across[[r, x]])
+            .sum();
+        v.clamp(lo, hi)
     })
 }
 
@@ -133,27 +150,51 @@ fn usable_period(period: f64, len: usize) -> f64 {
     }
 }
 
-/// Output pixel `i` on a period of `period` pixels read from a tile of `n` samples: the two
-/// neighbouring samples (wrapping) and the weight of the second.
-fn tap(i: usize, period: f64, n: usize) -> (usize, usize, f64) {
+/// The four samples a cubic reads and their weights.
+type Taps = ([usize; 4], [f64; 4]);
+
+/// Output pixel `i` on a period of `period` pixels read from a tile of `n` samples: the four
+/// samples around its phase (wrapping) and their cubic weights.
+fn taps(i: usize, period: f64, n: usize) -> Taps {
     let phase = (i as f64).rem_euclid(period) / period * n as f64;
     let lower = phase.floor();
-    let i0 = (lower as usize) % n;
-    (i0, (i0 + 1) % n, phase - lower)
+    let at = [-1, 0, 1, 2].map(|d| (lower as i64 + d).rem_euclid(n as i64) as usize);
+    (at, cubic_weights(phase - lower))
 }
 
-/// `plane` at the sub-pixel position (y, x), bilinear, positions clamped to the plane (h, w > 0).
-fn bilinear_clamped(plane: &Array2<f64>, y: f64, x: f64) -> f64 {
+/// Keys' cubic convolution weights (a = -1/2, Catmull-Rom) of the samples at -1, 0, 1 and 2
+/// for a position `f` in [0, 1) past sample 0. Exact on quadratics and, unlike the bilinear
+/// tent, it hardly damps detail at small `f`: the near-regular knit's weave laid on its
+/// measured sub-pixel lattice (31.98 x 31.97 px) went from x4.21 to x2.14 the another-crop
+/// level, against x1.91 on the exact 32 x 32.
+fn cubic_weights(f: f64) -> [f64; 4] {
+    let (f2, f3) = (f * f, f * f * f);
+    [
+        0.5 * (-f3 + 2.0 * f2 - f),
+        0.5 * (3.0 * f3 - 5.0 * f2 + 2.0),
+        0.5 * (-3.0 * f3 + 4.0 * f2 + f),
+        0.5 * (f3 - f2),
+    ]
+}
+
+/// `plane` at the sub-pixel position (y, x), cubic, sample positions clamped to the plane
+/// (h, w > 0).
+fn cubic_clamped(plane: &Array2<f64>, y: f64, x: f64) -> f64 {
     let (h, w) = plane.dim();
     let split = |v: f64, len: usize| {
         let v = v.clamp(0.0, (len - 1) as f64);
-        let i0 = v.floor() as usize;
-        (i0, (i0 + 1).min(len - 1), v - i0 as f64)
+        let lower = v.floor();
+        let at = [-1, 0, 1, 2].map(|d| (lower as i64 + d).clamp(0, len as i64 - 1) as usize);
+        (at, cubic_weights(v - lower))
     };
-    let ((y0, y1, fy), (x0, x1, fx)) = (split(y, h), split(x, w));
-    let top = plane[[y0, x0]] * (1.0 - fx) + plane[[y0, x1]] * fx;
-    let bottom = plane[[y1, x0]] * (1.0 - fx) + plane[[y1, x1]] * fx;
-    top * (1.0 - fy) + bottom * fy
+    let ((rows, wy), (cols, wx)) = (split(y, h), split(x, w));
+    rows.iter()
+        .zip(wy)
+        .map(|(&r, wr)| {
+            let across: f64 = cols.iter().zip(wx).map(|(&c, wc)| wc * plane[[r, c]]).sum();
+            wr * across
+        })
+        .sum()
 }
 
 /// The normalised linear autocorrelation of a mean-removed `h x w` plane: lag (dy, dx) is the
@@ -544,11 +585,11 @@ mod tests {
         let samples = [2 * p.ceil() as usize, 2 * q.ceil() as usize];
         let tile = mean_tile(&clean, &lattice, samples);
         let back = tiled(&tile, &lattice, h, w);
-        // Bilinear sampling, twice, of harmonics down to 5.5 px wavelength: a few % of the
-        // pattern's range (about 5).
+        // Cubic sampling, twice, of harmonics down to 5.5 px wavelength: under 1 % of the
+        // pattern's range (about 5); bilinear sampling was off by 0.111 (a Python twin).
         let error = max_abs_diff(&back, &clean);
         println!("sub-pixel periods: noiseless max error {error}");
-        assert!(error < 0.15, "noiseless max error {error}");
+        assert!(error < 0.04, "noiseless max error {error}");
         // On whole-pixel periods, one sample per pixel, the interpolation is exact.
         let whole = Lattice {
             rows: 14.0,
@@ -573,6 +614,47 @@ mod tests {
         };
         let off = tiled(&mean_tile(&clean, &wrong, samples), &wrong, h, w);
         assert!(max_abs_diff(&off, &clean) > 0.5);
+    }
+
+    #[test]
+    fn cubic_weights_reproduce_quadratics_and_tiles_stay_in_range() {
+        let quadratic = |x: f64| 0.3 * x * x - 1.2 * x + 0.7;
+        for f in [0.0, 0.1, 0.25, 0.5, 0.9] {
+            let w = cubic_weights(f);
+            assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12, "{w:?}");
+            let at: f64 = (-1..=2)
+                .zip(w)
+                .map(|(d, w)| w * quadratic(f64::from(d)))
+                .sum();
+            assert!((at - quadratic(f)).abs() < 1e-12, "{f}: {at}");
+        }
+        // A hard edge laid on a sub-pixel period: the cubic overshoots it (below 0, above 1)
+        // and the laid values are cut to the tile's range.
+        let tile = Array2::from_shape_fn((4, 8), |(_, c)| if c < 4 { 0.0 } else { 1.0 });
+        let raw: f64 = (-1..=2)
+            .zip(cubic_weights(0.5))
+            .map(|(d, w)| w * tile[[0, (3 + d) as usize]])
+            .sum();
+        assert!((raw - 0.5).abs() < 1e-12);
+        let overshoot: f64 = (-1..=2)
+            .zip(cubic_weights(0.3))
+            .map(|(d, w)| w * tile[[0, (4 + d) as usize]])
+            .sum();
+        assert!(overshoot > 1.0, "the cubic overshoots: {overshoot}");
+        let laid = tiled(
+            &tile,
+            &Lattice {
+                rows: 4.0,
+                cols: 7.3,
+            },
+            16,
+            64,
+        );
+        assert!(laid.iter().all(|&v| (0.0..=1.0).contains(&v)));
+        assert!(
+            laid.iter().any(|&v| v > 0.0 && v < 1.0),
+            "edges interpolated"
+        );
     }
 
     #[test]

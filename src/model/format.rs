@@ -33,9 +33,9 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// always the MRF's), version 11 files (no light lightness tables), version 12 files (no
 /// chroma spreads), version 13 files (an exemplar at every texel), version 14 files (no
 /// light weights on the exemplar), version 15 files (no light weights on the periods),
-/// version 16 files (no light chroma tables) and version 17 files (no exemplar light weights
-/// on a lattice) are still read.
-pub const VERSION: u16 = 18;
+/// version 16 files (no light chroma tables), version 17 files (no exemplar light weights
+/// on a lattice) and version 18 files (period deviations at 16 bits) are still read.
+pub const VERSION: u16 = 19;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -563,6 +563,10 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
     write_periodic(w, model);
 }
 
+/// How the periods are stored: the mean period at 16 bits, its deviations at 8 bits from
+/// version 19 (16 before).
+const PERIOD_STORAGE: (Storage, Storage) = (Storage::Single, Storage::Byte);
+
 /// The version 4 periodic part: flag, periods, samples, the tiles and the range map's period.
 fn write_periodic(w: &mut Writer, model: &MaterialModel) {
     let Some(p) = model.periodic() else {
@@ -574,7 +578,7 @@ fn write_periodic(w: &mut Writer, model: &MaterialModel) {
     w.f32(p.lattice.cols);
     w.u8(p.rows as u8);
     w.u8(p.cols as u8);
-    write_principal(w, &p.periods, (Storage::Single, Storage::Single));
+    write_principal(w, &p.periods, PERIOD_STORAGE);
     if let Some(h) = &p.heights {
         let values: Vec<f64> = h.iter().map(|&v| f64::from(v)).collect();
         write_quantised(w, &values, Storage::Single);
@@ -649,7 +653,7 @@ fn range_map_record_bytes(r: &RangeMap) -> usize {
 pub fn periodic_bytes(model: &MaterialModel) -> usize {
     model.periodic().map_or(1, |p| {
         let heights = p.heights.as_ref().map_or(0, |_| 8 + 2 * p.rows * p.cols);
-        11 + principal_bytes(&p.periods, (Storage::Single, Storage::Single))
+        11 + principal_bytes(&p.periods, PERIOD_STORAGE)
             + heights
             + light_weights_bytes(p.light_weights.as_ref())
     })
@@ -850,7 +854,8 @@ pub fn as_stored(values: &[f32]) -> Vec<f32> {
     stored_as(values, Storage::Single)
 }
 
-/// The exemplar's crops as a file stores (8-bit codes) and reads them back.
+/// The exemplar's crops and the period deviations as a file stores (8-bit codes) and reads
+/// them back.
 pub fn as_stored_bytes(values: &[f32]) -> Vec<f32> {
     stored_as(values, Storage::Byte)
 }
@@ -1065,7 +1070,7 @@ fn parse(bytes: &[u8]) -> Parse<MaterialModel> {
         None
     };
     let periodic = if version >= 4 {
-        read_periodic(&mut r, subspaces.len(), range_map.is_some())?
+        read_periodic(&mut r, subspaces.len(), range_map.is_some(), version)?
     } else {
         None
     };
@@ -1423,7 +1428,13 @@ fn read_periodic(
     r: &mut Reader,
     clusters: usize,
     with_heights: bool,
+    version: u16,
 ) -> Parse<Option<PeriodicPart>> {
+    let storage = if version >= 19 {
+        PERIOD_STORAGE
+    } else {
+        (Storage::Single, Storage::Single)
+    };
     match r.u8()? {
         0 => Ok(None),
         1 => {
@@ -1441,7 +1452,7 @@ fn read_periodic(
                 r,
                 3 * rows * cols,
                 clusters,
-                (MAX_PERIOD_COMPONENTS, (Storage::Single, Storage::Single)),
+                (MAX_PERIOD_COMPONENTS, storage),
                 "periodic tile value",
             )?;
             let heights = if with_heights {
@@ -1653,6 +1664,44 @@ mod tests {
             let e = read(&record(Some(bad)), 14).unwrap_err();
             assert!(e.contains(&format!("exemplar step of {bad}")), "{e}");
         }
+    }
+
+    #[test]
+    fn period_deviations_are_8_bit_from_version_19() {
+        // One 1 x 2 period (6 values): its mean and one deviation, two subspaces' weights.
+        let periods = Principal {
+            basis: vec![
+                vec![0.5, -1.0, 0.25, 2.0, 0.0, 1.0],
+                vec![0.1, -0.2, 0.3, 0.0, 0.05, -0.1],
+            ],
+            weights: vec![vec![1.5], vec![-0.5]],
+        };
+        let record = |storage| {
+            let mut w = Writer(Vec::new());
+            // Flag, the lattice's periods, the samples per period.
+            w.u8(1);
+            w.f32(2.5);
+            w.f32(3.0);
+            w.u8(1);
+            w.u8(2);
+            write_principal(&mut w, &periods, storage);
+            w.0
+        };
+        let read = |bytes: &[u8], version| {
+            let part = read_periodic(&mut Reader::new(bytes), 2, false, version);
+            part.unwrap().unwrap().periods
+        };
+        let (new, old) = (
+            record(PERIOD_STORAGE),
+            record((Storage::Single, Storage::Single)),
+        );
+        assert_eq!(new.len() + 6, old.len(), "a byte a deviation value saved");
+        let (read_new, read_old) = (read(&new, 19), read(&old, 18));
+        assert_eq!(read_new.basis[1], as_stored_bytes(&periods.basis[1]));
+        assert_eq!(read_old.basis[1], as_stored(&periods.basis[1]));
+        assert_ne!(read_new.basis[1], read_old.basis[1]);
+        assert_eq!(read_new.basis[0], read_old.basis[0]);
+        assert_eq!(read_new.weights, periods.weights);
     }
 
     #[test]
