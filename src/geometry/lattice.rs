@@ -164,9 +164,10 @@ fn taps(i: usize, period: f64, n: usize) -> Taps {
 
 /// Keys' cubic convolution weights (a = -1/2, Catmull-Rom) of the samples at -1, 0, 1 and 2
 /// for a position `f` in [0, 1) past sample 0. Exact on quadratics and, unlike the bilinear
-/// tent, it hardly damps detail at small `f`: the near-regular knit's weave laid on its
-/// measured sub-pixel lattice (31.98 x 31.97 px) went from x4.21 to x2.14 the another-crop
-/// level, against x1.91 on the exact 32 x 32.
+/// tent, it hardly damps detail at small `f`: the built-in knit's own measured mean period,
+/// formed and laid on its detected sub-pixel lattice (31.98 x 31.97 px), went from x4.21 to
+/// x2.14 the another-crop level (nine frontal lights), against x1.91 on the exact 32 x 32;
+/// Lanczos-3 reached x2.04 there, but in the whole model its ringing cost x2.41 -> x3.00.
 fn cubic_weights(f: f64) -> [f64; 4] {
     let (f2, f3) = (f * f, f * f * f);
     [
