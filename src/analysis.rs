@@ -757,7 +757,7 @@ fn light_lightness(btf: &Btf, view: usize, with_chroma: bool) -> Result<LightLig
 }
 
 /// `model` with its exemplar where it takes its coarse variation from (`coarse`, see
-/// [`AnalysisOptions::coarse`]), and beside a range map, with or without it: the candidate
+/// [`AnalysisOptions::coarse`]), and beside a range map off a lattice, with or without it: the candidate
 /// the judge finds closest to the measured images (its structure distance summed over the
 /// `judged` pairs, seed 1, on the measured images' centred crop of at most [`JUDGED_SIDE`]).
 /// Without the exemplar once won on the leather, whose creases shade differently under every

@@ -118,7 +118,8 @@ pub fn tiled(tile: &Array2<f64>, lattice: &Lattice, rows: usize, cols: usize) ->
             .zip(weights)
             .map(|(&r, w)| w * across[[r, x]])
             .sum();
-        v.clamp(lo, hi)
+        // max then min, not clamp: a tile without finite values (lo > hi) must not panic.
+        v.max(lo).min(hi)
     })
 }
 
@@ -157,9 +158,15 @@ type Taps = ([usize; 4], [f64; 4]);
 /// samples around its phase (wrapping) and their cubic weights.
 fn taps(i: usize, period: f64, n: usize) -> Taps {
     let phase = (i as f64).rem_euclid(period) / period * n as f64;
-    let lower = phase.floor();
-    let at = [-1, 0, 1, 2].map(|d| (lower as i64 + d).rem_euclid(n as i64) as usize);
-    (at, cubic_weights(phase - lower))
+    cubic_taps(phase, |j| j.rem_euclid(n as i64) as usize)
+}
+
+/// The four samples around `position` (their indices through `index`, which wraps or clamps)
+/// and their cubic weights.
+fn cubic_taps(position: f64, index: impl Fn(i64) -> usize) -> Taps {
+    let lower = position.floor();
+    let at = [-1, 0, 1, 2].map(|d| index(lower as i64 + d));
+    (at, cubic_weights(position - lower))
 }
 
 /// Keys' cubic convolution weights (a = -1/2, Catmull-Rom) of the samples at -1, 0, 1 and 2
@@ -183,10 +190,8 @@ fn cubic_weights(f: f64) -> [f64; 4] {
 fn cubic_clamped(plane: &Array2<f64>, y: f64, x: f64) -> f64 {
     let (h, w) = plane.dim();
     let split = |v: f64, len: usize| {
-        let v = v.clamp(0.0, (len - 1) as f64);
-        let lower = v.floor();
-        let at = [-1, 0, 1, 2].map(|d| (lower as i64 + d).clamp(0, len as i64 - 1) as usize);
-        (at, cubic_weights(v - lower))
+        let last = len as i64 - 1;
+        cubic_taps(v.clamp(0.0, last as f64), |j| j.clamp(0, last) as usize)
     };
     let ((rows, wy), (cols, wx)) = (split(y, h), split(x, w));
     rows.iter()
@@ -655,6 +660,21 @@ mod tests {
         assert!(
             laid.iter().any(|&v| v > 0.0 && v < 1.0),
             "edges interpolated"
+        );
+        // A tile without finite values has no range to cut to: laid without a panic.
+        let broken = Array2::from_elem((2, 2), f64::NAN);
+        assert_eq!(
+            tiled(
+                &broken,
+                &Lattice {
+                    rows: 4.0,
+                    cols: 4.0
+                },
+                3,
+                5
+            )
+            .dim(),
+            (3, 5)
         );
     }
 
