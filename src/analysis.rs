@@ -475,11 +475,13 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
                 })
                 .collect::<Result<Vec<_>>>()?;
             // Beside a range map every light of its view keeps its own period, as weights on
-            // the subspaces' deviations; the lights do not shape them. Measured (knit, 128^2,
-            // x the another-crop level, mean over seeds): without the lights'
-            // periods x4.13 at the nine measured lights (seeds 1-4) and x3.98 halfway between
-            // them (seeds 1-4); with them, each counted like a subspace image, x3.97 (seeds
-            // 1-4) and x4.24 (seeds 1-2); not counted, x3.95 and x3.91 (seeds 1-4).
+            // the deviations, which the lights shape as much as the subspaces do. The
+            // deviations are grey (a light moves a weave's shading and shadows, not its
+            // colours, which the ratio's colour tables carry), a third of the bytes, so that
+            // more of them fit. Measured (knit, 128^2, x the another-crop level): 20 colour
+            // deviations shaped by the subspaces alone x2.41 / 2.39 / 2.40 / 2.43 at the nine
+            // measured frontal lights (seeds 1-4), x3.21 / 3.18 halfway between them (seeds
+            // 1-2); 48 grey ones shaped by both x1.93 / 1.91 / 1.93 / 1.94 and x2.94 / 2.88.
             let light_periods = match &registered {
                 Some(_) if options.light_weights => (0..btf.lights().len())
                     .into_par_iter()
@@ -491,14 +493,11 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
                 _ => Vec::new(),
             };
             let clusters = periods.len();
-            let counts: Vec<f64> = (periods.iter().map(|_| 1.0))
-                .chain(light_periods.iter().map(|_| 0.0))
-                .collect();
             let mut periods = principal(
-                &[periods, light_periods].concat(),
-                Some(&counts),
+                &grey_deviations([periods, light_periods].concat()),
+                None,
                 (MAX_PERIOD_COMPONENTS, PERIOD_RESIDUAL),
-                (format::as_stored, format::as_stored_bytes),
+                (format::as_stored, grey_stored),
             );
             let own = periods.weights.split_off(clusters);
             Some(PeriodicPart {
@@ -1289,6 +1288,45 @@ fn tile_samples(period: f64) -> usize {
     (period.round() as usize).clamp(1, MAX_TILE_SAMPLES)
 }
 
+/// `periods` (logarithms of linear RGB, channel-major) with their deviations from their mean
+/// made grey: each sample's three channels move by the mean of their three deviations, so
+/// that the principal deviations found among them are grey.
+fn grey_deviations(mut periods: Vec<Vec<f64>>) -> Vec<Vec<f64>> {
+    let Some(len) = periods.first().map(Vec::len) else {
+        return periods;
+    };
+    let mut mean = vec![0.0; len];
+    for p in &periods {
+        for (m, v) in mean.iter_mut().zip(p) {
+            *m += v / periods.len() as f64;
+        }
+    }
+    let plane = len / 3;
+    for p in &mut periods {
+        for i in 0..plane {
+            let shift = (0..3)
+                .map(|c| p[c * plane + i] - mean[c * plane + i])
+                .sum::<f64>()
+                / 3.0;
+            for c in 0..3 {
+                p[c * plane + i] = mean[c * plane + i] + shift;
+            }
+        }
+    }
+    periods
+}
+
+/// A grey period deviation (three channel planes) as a file stores it: one plane, the
+/// channels' mean, at 8 bits, standing for all three ([`format`] keeps one plane where every
+/// deviation is grey).
+fn grey_stored(values: &[f32]) -> Vec<f32> {
+    let plane = values.len() / 3;
+    let grey: Vec<f32> = (0..plane)
+        .map(|i| (values[i] + values[i + plane] + values[i + 2 * plane]) / 3.0)
+        .collect();
+    format::as_stored_bytes(&grey).repeat(3)
+}
+
 /// Smallest linear value a stored period holds (its logarithm is stored): far below a
 /// visible level, far above where a logarithm loses meaning.
 const PERIOD_MIN: f64 = 1e-4;
@@ -2032,6 +2070,38 @@ mod tests {
                 "{material:?} at {side}^2"
             );
         }
+    }
+
+    #[test]
+    fn grey_deviations_keep_the_mean_and_each_samples_mean_deviation() {
+        // Three 1 x 2 periods (channel-major logarithms) around a coloured mean.
+        let periods = vec![
+            vec![0.0, 1.0, -1.0, 0.5, 2.0, 0.0],
+            vec![0.3, 1.0, -0.4, 0.2, 2.3, 0.6],
+            vec![-0.3, 1.0, -1.6, 0.8, 1.7, -0.6],
+        ];
+        let grey = grey_deviations(periods.clone());
+        for (p, g) in periods.iter().zip(&grey) {
+            for i in 0..2 {
+                let mean_of = |f: &Vec<f64>| (0..3).map(|c| f[2 * c + i]).sum::<f64>();
+                // The channels' sum kept, and the three channels moved alike.
+                assert!((mean_of(p) - mean_of(g)).abs() < 1e-12);
+                let moved: Vec<f64> = (0..3).map(|c| g[2 * c + i] - grey[0][2 * c + i]).collect();
+                assert!(
+                    moved.iter().all(|m| (m - moved[0]).abs() < 1e-12),
+                    "{moved:?}"
+                );
+            }
+        }
+        // The mean stays where it was (the first period sits on it: the others mirror).
+        for (g, p) in grey[0].iter().zip(&periods[0]) {
+            assert!((g - p).abs() < 1e-12, "{g} {p}");
+        }
+        // Stored, a deviation is one plane repeated.
+        let stored = grey_stored(&[0.1, -0.2, 0.3, 0.0, 0.2, -0.1]);
+        assert_eq!(stored[..2], stored[2..4]);
+        assert_eq!(stored[..2], stored[4..]);
+        assert!((stored[0] - 0.2).abs() < 2e-3 && (stored[1] + 0.1).abs() < 2e-3);
     }
 
     #[test]

@@ -35,7 +35,7 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// light weights on the exemplar), version 15 files (no light weights on the periods),
 /// version 16 files (no light chroma tables), version 17 files (no exemplar light weights
 /// on a lattice) and version 18 files (period deviations at 16 bits) are still read.
-pub const VERSION: u16 = 19;
+pub const VERSION: u16 = 20;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -567,7 +567,8 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
 /// version 19 (16 before).
 const PERIOD_STORAGE: (Storage, Storage) = (Storage::Single, Storage::Byte);
 
-/// The version 4 periodic part: flag, periods, samples, the tiles and the range map's period.
+/// The version 4 periodic part: flag, periods, samples, the tiles and the range map's period;
+/// from version 20 the colour planes each deviation keeps ([`deviation_planes`]) before them.
 fn write_periodic(w: &mut Writer, model: &MaterialModel) {
     let Some(p) = model.periodic() else {
         w.u8(0);
@@ -578,11 +579,29 @@ fn write_periodic(w: &mut Writer, model: &MaterialModel) {
     w.f32(p.lattice.cols);
     w.u8(p.rows as u8);
     w.u8(p.cols as u8);
-    write_principal(w, &p.periods, PERIOD_STORAGE);
+    let planes = deviation_planes(p);
+    w.u8(planes as u8);
+    write_principal(w, &written_periods(p, planes), PERIOD_STORAGE);
     if let Some(h) = &p.heights {
         let values: Vec<f64> = h.iter().map(|&v| f64::from(v)).collect();
         write_quantised(w, &values, Storage::Single);
     }
+}
+
+/// Colour planes a period deviation keeps in a version 20 file: 1 where every deviation is
+/// grey ([`PeriodicPart::grey_deviations`]: a third of the bytes), 3 otherwise.
+fn deviation_planes(p: &PeriodicPart) -> usize {
+    if p.grey_deviations() { 1 } else { 3 }
+}
+
+/// The periods as [`write_periodic`] writes them: each deviation cut to its first `planes`
+/// colour planes (the mean whole).
+fn written_periods(p: &PeriodicPart, planes: usize) -> Principal {
+    let mut written = p.periods.clone();
+    for d in written.basis.iter_mut().skip(1) {
+        d.truncate(planes * p.rows * p.cols);
+    }
+    written
 }
 
 /// Fields stored as a mean and principal deviations: the number of deviations, each basis
@@ -652,11 +671,15 @@ fn range_map_record_bytes(r: &RangeMap) -> usize {
 /// Bytes the periodic part takes in the file (1 without one).
 pub fn periodic_bytes(model: &MaterialModel) -> usize {
     model.periodic().map_or(1, |p| {
-        let heights = p.heights.as_ref().map_or(0, |_| 8 + 2 * p.rows * p.cols);
-        11 + principal_bytes(&p.periods, PERIOD_STORAGE)
-            + heights
-            + light_weights_bytes(p.light_weights.as_ref())
+        periodic_bytes_of(p) + light_weights_bytes(p.light_weights.as_ref())
     })
+}
+
+/// Bytes [`write_periodic`] writes for `p`: flag, lattice and samples (11), the deviations'
+/// planes, the periods and the range map's period.
+fn periodic_bytes_of(p: &PeriodicPart) -> usize {
+    let heights = p.heights.as_ref().map_or(0, |_| 8 + 2 * p.rows * p.cols);
+    12 + principal_bytes(&written_periods(p, deviation_planes(p)), PERIOD_STORAGE) + heights
 }
 
 /// Bytes [`write_light_weights`] writes for `weights` after its flag.
@@ -1332,7 +1355,7 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
             let lightness = if version >= 5 {
                 read_principal(
                     r,
-                    rows * cols,
+                    [rows * cols; 2],
                     clusters,
                     (
                         MAX_EXEMPLAR_COMPONENTS,
@@ -1358,7 +1381,7 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
                 let (chroma_rows, chroma_cols) = (rows.div_ceil(step), cols.div_ceil(step));
                 let fields = read_principal(
                     r,
-                    2 * chroma_rows * chroma_cols,
+                    [2 * chroma_rows * chroma_cols; 2],
                     clusters,
                     (MAX_EXEMPLAR_COMPONENTS, (Storage::Byte, Storage::Byte)),
                     "exemplar chroma value",
@@ -1397,11 +1420,11 @@ fn read_stored(r: &mut Reader, count: usize, storage: Storage, what: &str) -> Pa
     Ok(values.into_iter().map(|v| v as f32).collect())
 }
 
-/// Reads what [`write_principal`] wrote: at most `max_deviations` deviations of `len` values
-/// each, and `clusters` rows of weights.
+/// Reads what [`write_principal`] wrote: a mean of `lens[0]` values, at most `max_deviations`
+/// deviations of `lens[1]` values each, and `clusters` rows of weights.
 fn read_principal(
     r: &mut Reader,
-    len: usize,
+    lens: [usize; 2],
     clusters: usize,
     (max_deviations, (mean, deviation)): (usize, (Storage, Storage)),
     what: &str,
@@ -1413,7 +1436,10 @@ fn read_principal(
         ));
     }
     let basis = (0..=deviations)
-        .map(|j| read_stored(r, len, if j == 0 { mean } else { deviation }, what))
+        .map(|j| match j {
+            0 => read_stored(r, lens[0], mean, what),
+            _ => read_stored(r, lens[1], deviation, what),
+        })
         .collect::<Parse<Vec<_>>>()?;
     r.ensure(clusters, 4 * deviations, "principal weights")?;
     let weights = (0..clusters)
@@ -1448,13 +1474,25 @@ fn read_periodic(
                     "periodic tile of {rows} x {cols} samples (1..={MAX_TILE_SAMPLES} each)"
                 ));
             }
-            let periods = read_principal(
+            let plane = rows * cols;
+            let planes = match version {
+                ..20 => 3,
+                _ => match r.u8()? {
+                    p @ (1 | 3) => usize::from(p),
+                    p => return Err(format!("period deviations of {p} colour planes (1 or 3)")),
+                },
+            };
+            let mut periods = read_principal(
                 r,
-                3 * rows * cols,
+                [3 * plane, planes * plane],
                 clusters,
                 (MAX_PERIOD_COMPONENTS, storage),
                 "periodic tile value",
             )?;
+            // A grey deviation's one plane moves all three channels.
+            for d in periods.basis.iter_mut().skip(1) {
+                *d = d.repeat(3 / planes);
+            }
             let heights = if with_heights {
                 Some(read_stored(
                     r,
@@ -1702,6 +1740,67 @@ mod tests {
         assert_ne!(read_new.basis[1], read_old.basis[1]);
         assert_eq!(read_new.basis[0], read_old.basis[0]);
         assert_eq!(read_new.weights, periods.weights);
+    }
+
+    #[test]
+    fn grey_period_deviations_keep_one_plane_from_version_20() {
+        // A 1 x 2 period: its mean and two deviations, stored values, two subspaces' weights.
+        let grey = |a: f32, b: f32| as_stored_bytes(&[a, b]).repeat(3);
+        let part = |second: Vec<f32>| PeriodicPart {
+            lattice: Lattice {
+                rows: 2.5,
+                cols: 3.0,
+            },
+            rows: 1,
+            cols: 2,
+            periods: Principal {
+                basis: vec![
+                    as_stored(&[0.5, -1.0, 0.25, 2.0, 0.0, 1.0]),
+                    grey(0.1, -0.2),
+                    second,
+                ],
+                weights: vec![vec![1.5, 0.25], vec![-0.5, 2.0]],
+            },
+            heights: None,
+            light_weights: None,
+        };
+        let record = |p: &PeriodicPart| {
+            let mut w = Writer(Vec::new());
+            w.u8(1);
+            w.f32(p.lattice.rows);
+            w.f32(p.lattice.cols);
+            w.u8(p.rows as u8);
+            w.u8(p.cols as u8);
+            let planes = deviation_planes(p);
+            w.u8(planes as u8);
+            write_principal(&mut w, &written_periods(p, planes), PERIOD_STORAGE);
+            w.0
+        };
+        let read = |bytes: &[u8]| read_periodic(&mut Reader::new(bytes), 2, false, 20);
+        let (greys, colours) = (
+            part(grey(0.05, 0.3)),
+            part(as_stored_bytes(&[0.05, 0.3, 0.0, 0.1, -0.1, 0.2])),
+        );
+        assert_eq!(
+            (deviation_planes(&greys), deviation_planes(&colours)),
+            (1, 3)
+        );
+        let (short, long) = (record(&greys), record(&colours));
+        assert_eq!(
+            short.len() + 2 * 2 * 2,
+            long.len(),
+            "two values saved a deviation"
+        );
+        assert_eq!(short.len(), periodic_bytes_of(&greys));
+        assert_eq!(long.len(), periodic_bytes_of(&colours));
+        // Both read back exactly, the grey plane standing for all three channels.
+        assert_eq!(read(&short).unwrap(), Some(greys));
+        assert_eq!(read(&long).unwrap(), Some(colours));
+        // Any other count of planes is refused in one line.
+        let mut odd = short.clone();
+        odd[11] = 2;
+        let e = read(&odd).unwrap_err();
+        assert!(e.contains("2 colour planes"), "{e}");
     }
 
     #[test]

@@ -245,12 +245,14 @@ pub struct MaterialParts {
 /// resampled to it).
 pub const MAX_TILE_SAMPLES: usize = 32;
 
-/// Most principal deviations the subspace images' periods are stored with (8-bit codes from
-/// format version 19, 3 KB each at 32 x 32 samples; at most 8 at 16 bits before). Measured
-/// (knit, 128^2, 20 clusters, nine frontal lights, x the another-crop level, seed 1, with
-/// the lattice's cubic sampling): 8 deviations x3.58, 20 x2.41 (the lights' own periods,
-/// weighed on the subspaces' deviations, need more than eight).
-pub const MAX_PERIOD_COMPONENTS: usize = 20;
+/// Most principal deviations the subspace images' and lights' periods are stored with (8-bit
+/// codes from format version 19, 3 KB each at 32 x 32 samples, 1 KB where grey from version
+/// 20; at most 8 at 16 bits before, 20 before version 20). Measured (knit, 128^2, 20
+/// clusters, nine frontal lights, x the another-crop level, seed 1, with the lattice's cubic
+/// sampling): 8 deviations x3.58, 20 x2.41 (colour, shaped by the subspaces alone); grey and
+/// shaped by the lights too, 20 x2.59, 32 x2.22, 48 x1.93 (the 0.1 % residual rule stopped
+/// near there when 64 were allowed; 48 in colour x1.97 but a 191,611-byte file).
+pub const MAX_PERIOD_COMPONENTS: usize = 48;
 
 /// Fields of one length, one per subspace image, stored compactly: their mean and a few
 /// principal deviations, with each subspace's weights on the deviations (the subspace images
@@ -323,8 +325,8 @@ impl Principal {
 /// ratio, the period carries the weave); and the range map's mean period, which replaces the
 /// quilted range map so relief and colour keep one lattice. The subspace images' periods differ
 /// mostly by light, so they are stored as a mean period (16-bit codes, 6 KB at 32 x 32
-/// samples) and principal deviations (8-bit codes, 3 KB each) with per-subspace weights, not
-/// one period each.
+/// samples) and principal deviations (8-bit codes; grey from format version 20, 1 KB each)
+/// with per-subspace weights, not one period each.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PeriodicPart {
     /// Periods along rows and columns, measured pixels.
@@ -359,6 +361,17 @@ impl PeriodicPart {
     pub fn light_tile(&self, l: usize) -> Option<Array3<f64>> {
         let weights = self.light_weights.as_ref()?.weights.get(l)?;
         self.tile_of(self.periods.combined_with(weights)?)
+    }
+
+    /// Whether every deviation is grey: its three channels' logarithms equal, as the shading
+    /// and shadows a light changes are and as analysis stores them (format version 20 keeps
+    /// one plane of such deviations).
+    pub fn grey_deviations(&self) -> bool {
+        let plane = self.rows * self.cols;
+        self.periods.basis.iter().skip(1).all(|d| {
+            let (first, rest) = d.split_at(plane.min(d.len()));
+            rest.chunks(plane).all(|c| c == first)
+        })
     }
 
     /// A period's logarithms as linear RGB, (3, rows, cols).

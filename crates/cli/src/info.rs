@@ -189,12 +189,13 @@ fn model_parts(m: &MaterialModel) -> Vec<ModelPart> {
             "lattice",
             format::periodic_bytes(m),
             format!(
-                "period of {:.1} x {:.1} pixels in {} x {} samples (mean and {} deviations){}",
+                "period of {:.1} x {:.1} pixels in {} x {} samples (mean and {} {}deviations){}",
                 p.lattice.cols,
                 p.lattice.rows,
                 p.cols,
                 p.rows,
                 p.periods.basis.len().saturating_sub(1),
+                if p.grey_deviations() { "grey " } else { "" },
                 p.light_weights.as_ref().map_or(String::new(), |l| format!(
                     "; each of {} lights in view {} weighs its deviations",
                     l.weights.len(),
