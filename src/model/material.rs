@@ -295,8 +295,13 @@ impl Principal {
 
     /// The mean plus the deviations with `weights` (one a deviation; missing ones are 0).
     pub fn combined_with(&self, weights: &[f32]) -> Option<Vec<f64>> {
+        self.combined_by(weights.iter().map(|&w| f64::from(w)))
+    }
+
+    /// [`Principal::combined_with`] with weights in double precision (blends of weights).
+    pub fn combined_by(&self, weights: impl IntoIterator<Item = f64>) -> Option<Vec<f64>> {
         let mut field = vec![0.0; self.basis.first()?.len()];
-        let coefficients = std::iter::once(1.0).chain(weights.iter().map(|&w| f64::from(w)));
+        let coefficients = std::iter::once(1.0).chain(weights);
         for (c, b) in coefficients.zip(&self.basis) {
             for (f, &v) in field.iter_mut().zip(b) {
                 *f += c * f64::from(v);
@@ -372,6 +377,12 @@ impl PeriodicPart {
             let (first, rest) = d.split_at(plane.min(d.len()));
             rest.chunks(plane).all(|c| c == first)
         })
+    }
+
+    /// The period with `weights` on the deviations (a blend of lights' or subspaces' weights),
+    /// as [`PeriodicPart::tile`] gives a subspace's.
+    pub fn tile_with(&self, weights: impl IntoIterator<Item = f64>) -> Option<Array3<f64>> {
+        self.tile_of(self.periods.combined_by(weights)?)
     }
 
     /// A period's logarithms as linear RGB, (3, rows, cols).
