@@ -570,10 +570,14 @@ const PERIOD_STORAGE: (Storage, Storage) = (Storage::Single, Storage::Byte);
 /// The version 4 periodic part: flag, periods, samples, the tiles and the range map's period;
 /// from version 20 the colour planes each deviation keeps ([`deviation_planes`]) before them.
 fn write_periodic(w: &mut Writer, model: &MaterialModel) {
-    let Some(p) = model.periodic() else {
-        w.u8(0);
-        return;
-    };
+    match model.periodic() {
+        None => w.u8(0),
+        Some(p) => write_periodic_part(w, p),
+    }
+}
+
+/// [`write_periodic`] for a model with a periodic part: flag 1 and the part.
+fn write_periodic_part(w: &mut Writer, p: &PeriodicPart) {
     w.u8(1);
     w.f32(p.lattice.rows);
     w.f32(p.lattice.cols);
@@ -1766,14 +1770,7 @@ mod tests {
         };
         let record = |p: &PeriodicPart| {
             let mut w = Writer(Vec::new());
-            w.u8(1);
-            w.f32(p.lattice.rows);
-            w.f32(p.lattice.cols);
-            w.u8(p.rows as u8);
-            w.u8(p.cols as u8);
-            let planes = deviation_planes(p);
-            w.u8(planes as u8);
-            write_principal(&mut w, &written_periods(p, planes), PERIOD_STORAGE);
+            write_periodic_part(&mut w, p);
             w.0
         };
         let read = |bytes: &[u8]| read_periodic(&mut Reader::new(bytes), 2, false, 20);
