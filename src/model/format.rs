@@ -1782,6 +1782,12 @@ mod tests {
             (deviation_planes(&greys), deviation_planes(&colours)),
             (1, 3)
         );
+        // A period of no samples (no file holds one) is not grey, and asking does not panic.
+        let empty = PeriodicPart {
+            rows: 0,
+            ..greys.clone()
+        };
+        assert!(!empty.grey_deviations());
         let (short, long) = (record(&greys), record(&colours));
         assert_eq!(
             short.len() + 2 * 2 * 2,

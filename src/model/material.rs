@@ -370,13 +370,14 @@ impl PeriodicPart {
 
     /// Whether every deviation is grey: its three channels' logarithms equal, as the shading
     /// and shadows a light changes are and as analysis stores them (format version 20 keeps
-    /// one plane of such deviations).
+    /// one plane of such deviations). A period of no samples (no model holds one) is not.
     pub fn grey_deviations(&self) -> bool {
         let plane = self.rows * self.cols;
-        self.periods.basis.iter().skip(1).all(|d| {
-            let (first, rest) = d.split_at(plane.min(d.len()));
-            rest.chunks(plane).all(|c| c == first)
-        })
+        plane > 0
+            && self.periods.basis.iter().skip(1).all(|d| {
+                let (first, rest) = d.split_at(plane.min(d.len()));
+                rest.chunks(plane).all(|c| c == first)
+            })
     }
 
     /// The period with `weights` on the deviations (a blend of lights' or subspaces' weights),
