@@ -619,35 +619,19 @@ impl MaterialModel {
     /// An empty cache holding the range map's heights, and the exemplar's details where one
     /// quilt lays both ([`MaterialModel::laid_together`], [`MaterialModel::lattice_relief`]).
     fn relief_cache(&self, o: &SynthesisOptions, noise: NoiseBank) -> SynthesisCache {
-        if let Some((relief, details)) = self.laid_together(o) {
-            return self.cache_laid(o, relief, details, noise);
-        }
-        if let Some((heights, details)) = self.lattice_relief(o) {
-            let cache = self.empty_cache(o, Some(heights), noise);
-            cache
-                .structure
-                .set(details)
-                .expect("a new cache has no structure yet");
-            return cache;
-        }
-        self.empty_cache(o, self.range_heights(o), noise)
-    }
-
-    /// An empty cache holding the range map's heights (integrated here from the quilted
-    /// `relief`) and the exemplar details laid with them by one quilt
-    /// ([`MaterialModel::laid_together`]).
-    fn cache_laid(
-        &self,
-        o: &SynthesisOptions,
-        relief: QuiltedRelief,
-        details: LaidExemplar,
-        noise: NoiseBank,
-    ) -> SynthesisCache {
-        let heights = cropped(details.scale.apply(relief.integrate()), o.rows, o.cols);
-        let cache = self.empty_cache(o, Some(heights), noise);
+        let (heights, details) = if let Some((relief, details)) = self.laid_together(o) {
+            // The heights are integrated here from the quilted relief's differences.
+            let heights = cropped(details.scale.apply(relief.integrate()), o.rows, o.cols);
+            (Some(heights), Some(details))
+        } else if let Some((heights, details)) = self.lattice_relief(o) {
+            (Some(heights), details)
+        } else {
+            return self.empty_cache(o, self.range_heights(o), noise);
+        };
+        let cache = self.empty_cache(o, heights, noise);
         cache
             .structure
-            .set(Some(details))
+            .set(details)
             .expect("a new cache has no structure yet");
         cache
     }
