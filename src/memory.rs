@@ -1,6 +1,6 @@
-//! The memory budget: peak-memory estimates of the long commands, pure functions of the sizes
-//! they are given, checked before any work starts so that a request the machine cannot hold is
-//! refused with a size that fits instead of being killed half-way.
+//! The memory budget: peak-memory estimates of the long commands, pure functions of the sizes and
+//! worker threads they are given, checked before any work starts so that a request the machine
+//! cannot hold is refused with a size that fits instead of being killed half-way.
 //!
 //! The constants are measured peaks (resident set, `crates/cli/tests/limits.rs` checks each estimate
 //! against a spawned command's measured peak) rounded up: an estimate errs on the large side.
@@ -19,23 +19,38 @@ const SYNTH_PER_PIXEL_SUBSPACE: u64 = 64;
 /// as f32 (12 bytes a pixel) and encoded (at most 4 bytes a pixel for PNG).
 const WRITER_IMAGES: u64 = 96;
 const WRITER_PER_PIXEL: u64 = 16;
+/// Bytes per pixel each worker thread holds while it relights one image of a synthesized BTF
+/// from the cached subspace images: a 256^2 BTF of four views peaked at 136 MB on one thread,
+/// 138 MB on two, 161-179 MB on four, 245-267 MB on eight and 381-383 MB on sixteen.
+const WRITER_PER_PIXEL_THREAD: u64 = 320;
 
 /// Bytes per measured value (texel x view x light x colour): the analysis streams the images,
 /// keeping a little per value (histograms, the frontal view's photometric stereo).
 const ANALYZE_PER_VALUE: u64 = 1;
 /// Bytes per texel per subspace image: the subspace images and their pyramids and fits.
 const ANALYZE_PER_TEXEL_SUBSPACE: u64 = 512;
+/// Bytes per worker thread the analysis adds whatever the size: each thread decodes and
+/// histograms images in its own allocator arena. A 16^2 BTF of 6561 images peaked at 33 MB
+/// on one thread, 43-60 MB on two, 59-83 MB on eight and 76-96 MB on sixteen.
+const ANALYZE_PER_THREAD: u64 = 10 << 20;
 
 /// Bytes per measured value an LPCA fit holds: the BTF as f32, the working copy the
 /// factorization reads and the reconstruction measured against it (11.4 measured).
 const LPCA_PER_VALUE: u64 = 16;
-/// What an LPCA fit holds whatever the size: the linear algebra's workspaces and threads.
-const LPCA_FIXED_BYTES: u64 = 64 << 20;
+/// Bytes per worker thread an LPCA fit holds whatever the size: the linear algebra's
+/// workspaces. A 16^2 BTF of 6561 images peaked at 105-107 MB on one thread, 122-140 MB on
+/// two, 159-171 MB on four, 231-237 MB on eight and 311-365 MB on sixteen.
+const LPCA_PER_THREAD: u64 = 24 << 20;
 
 /// The GPU driver's own memory (lavapipe, the software Vulkan driver, takes most).
 const RENDER_DRIVER_BYTES: u64 = 160 << 20;
 /// Bytes per window pixel: render targets, depth, read-back and the output image.
 const RENDER_PER_PIXEL: u64 = 256;
+/// What each worker thread adds to a render, a fixed part and a part per texel of the tile:
+/// its share of the textures made in parallel. A 256^2 window peaked at 216 / 328 MB (one /
+/// sixteen threads) with a 256^2 tile, 271 / 434 MB with 512^2 and 460 / 764 MB with 1024^2.
+const RENDER_PER_THREAD: u64 = 6 << 20;
+const RENDER_PER_TEXEL_THREAD: u64 = 24;
 
 /// Peak bytes of synthesizing `rows` x `cols` images that draw on `subspaces` subspace images.
 pub fn synthesis_bytes(rows: usize, cols: usize, subspaces: usize) -> u64 {
@@ -44,58 +59,76 @@ pub fn synthesis_bytes(rows: usize, cols: usize, subspaces: usize) -> u64 {
 }
 
 /// Peak bytes of synthesizing a BTF of `rows` x `cols` images drawing on `subspaces` subspace
-/// images and writing it (zip or folder): the synthesis plus the images the writer holds.
-pub fn btf_synthesis_bytes(rows: usize, cols: usize, subspaces: usize) -> u64 {
+/// images and writing it (zip or folder) on `threads` worker threads ([`worker_threads`]): the
+/// synthesis, the images the writer holds and the image each thread is relighting.
+pub fn btf_synthesis_bytes(rows: usize, cols: usize, subspaces: usize, threads: usize) -> u64 {
     let pixels = rows as u64 * cols as u64;
-    synthesis_bytes(rows, cols, subspaces) + pixels * WRITER_IMAGES * WRITER_PER_PIXEL
+    synthesis_bytes(rows, cols, subspaces)
+        + pixels * (WRITER_IMAGES * WRITER_PER_PIXEL + threads as u64 * WRITER_PER_PIXEL_THREAD)
 }
 
-/// Peak bytes of analysing a `width` x `height` BTF of `views` x `lights` images into
-/// `clusters` subspace images.
-pub fn analysis_bytes(width: usize, height: usize, images: usize, clusters: usize) -> u64 {
+/// Peak bytes of analysing a `width` x `height` BTF of `images` images into `clusters`
+/// subspace images on `threads` worker threads ([`worker_threads`]).
+pub fn analysis_bytes(
+    width: usize,
+    height: usize,
+    images: usize,
+    clusters: usize,
+    threads: usize,
+) -> u64 {
     let texels = width as u64 * height as u64;
     BASE_BYTES
+        + threads as u64 * ANALYZE_PER_THREAD
         + texels * 3 * images as u64 * ANALYZE_PER_VALUE
         + texels * clusters as u64 * ANALYZE_PER_TEXEL_SUBSPACE
 }
 
+/// The worker threads this process's parallel stages run on (rayon's global pool).
+pub fn worker_threads() -> usize {
+    rayon::current_num_threads()
+}
+
 /// Peak bytes of an LPCA fit of a `width` x `height` BTF of `images` images (for PCA RF, one
-/// view's images: it holds one view at a time).
-pub fn lpca_bytes(width: usize, height: usize, images: usize) -> u64 {
+/// view's images: it holds one view at a time) on `threads` worker threads.
+pub fn lpca_bytes(width: usize, height: usize, images: usize, threads: usize) -> u64 {
     BASE_BYTES
-        + LPCA_FIXED_BYTES
+        + threads as u64 * LPCA_PER_THREAD
         + width as u64 * height as u64 * 3 * images as u64 * LPCA_PER_VALUE
 }
 
 /// Peak bytes of rendering `pixels` window pixels with a `texture` x `texture` texture drawn
-/// on `subspaces` subspace images.
+/// on `subspaces` subspace images, on `threads` worker threads.
 /// The textures are synthesized like any image ([`synthesis_bytes`]).
-pub fn render_bytes(pixels: usize, texture: usize, subspaces: usize) -> u64 {
+pub fn render_bytes(pixels: usize, texture: usize, subspaces: usize, threads: usize) -> u64 {
+    let texels = texture as u64 * texture as u64;
     synthesis_bytes(texture, texture, subspaces)
         + RENDER_DRIVER_BYTES
         + pixels as u64 * RENDER_PER_PIXEL
+        + threads as u64 * (RENDER_PER_THREAD + texels * RENDER_PER_TEXEL_THREAD)
 }
 
 /// The most subspace images one synthesized (view, light) image draws on: the 3 x 3 measured
 /// pairs around it (`MaterialModel::subspace_weights`).
 pub const SUBSPACES_PER_IMAGE: usize = 9;
 
-/// Peak bytes of `btfmrf bench` (and of the benchmark inside `btfmrf demo`): the analysis, one
-/// `synthesis_side`^2 image, and with `baselines` the LPCA fits, one after the other.
+/// Peak bytes of `btfmrf bench` (and of the benchmark inside `btfmrf demo`): the analysis on
+/// `threads` worker threads, one `synthesis_side`^2 image, and with `baselines` the LPCA fits,
+/// one after the other.
 pub fn bench_bytes(
     (width, height, images): (usize, usize, usize),
     clusters: usize,
     synthesis_side: usize,
     baselines: bool,
+    threads: usize,
 ) -> u64 {
     let subspaces = clusters.min(SUBSPACES_PER_IMAGE);
-    let mrf = analysis_bytes(width, height, images, clusters).max(synthesis_bytes(
+    let mrf = analysis_bytes(width, height, images, clusters, threads).max(synthesis_bytes(
         synthesis_side,
         synthesis_side,
         subspaces,
     ));
     if baselines {
-        mrf.max(lpca_bytes(width, height, images))
+        mrf.max(lpca_bytes(width, height, images, threads))
     } else {
         mrf
     }
@@ -278,11 +311,15 @@ mod tests {
     fn estimates_grow_with_every_size() {
         assert!(synthesis_bytes(1024, 1024, 1) < synthesis_bytes(2048, 1024, 1));
         assert!(synthesis_bytes(1024, 1024, 1) < synthesis_bytes(1024, 1024, 2));
-        assert!(analysis_bytes(64, 64, 81, 20) < analysis_bytes(64, 64, 6561, 20));
-        assert!(analysis_bytes(64, 64, 81, 20) < analysis_bytes(64, 64, 81, 40));
-        assert!(lpca_bytes(64, 64, 81) < lpca_bytes(128, 64, 81));
-        assert!(render_bytes(512 * 512, 1024, 4) < render_bytes(512 * 512, 2048, 4));
-        assert!(synthesis_bytes(64, 64, 3) < btf_synthesis_bytes(64, 64, 3));
+        assert!(analysis_bytes(64, 64, 81, 20, 2) < analysis_bytes(64, 64, 6561, 20, 2));
+        assert!(analysis_bytes(64, 64, 81, 20, 2) < analysis_bytes(64, 64, 81, 40, 2));
+        assert!(analysis_bytes(64, 64, 81, 20, 2) < analysis_bytes(64, 64, 81, 20, 16));
+        assert!(lpca_bytes(64, 64, 81, 2) < lpca_bytes(128, 64, 81, 2));
+        assert!(lpca_bytes(64, 64, 81, 2) < lpca_bytes(64, 64, 81, 16));
+        assert!(render_bytes(512 * 512, 1024, 4, 2) < render_bytes(512 * 512, 2048, 4, 2));
+        assert!(render_bytes(512 * 512, 1024, 4, 2) < render_bytes(512 * 512, 1024, 4, 16));
+        assert!(synthesis_bytes(64, 64, 3) < btf_synthesis_bytes(64, 64, 3, 1));
+        assert!(btf_synthesis_bytes(64, 64, 3, 2) < btf_synthesis_bytes(64, 64, 3, 16));
         // The closed form at one point: 8192^2 drawing on one subspace is about 12 GiB.
         let big = synthesis_bytes(8192, 8192, 1);
         assert_eq!(big, BASE_BYTES + 8192 * 8192 * (128 + 64));

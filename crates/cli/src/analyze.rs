@@ -288,7 +288,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         btf.height() as usize,
         btf.image_count(),
     );
-    let need = |clusters| memory::analysis_bytes(w, h, images, clusters);
+    let threads = memory::worker_threads();
+    let need = |clusters| memory::analysis_bytes(w, h, images, clusters, threads);
     global.check_memory(
         format!(
             "analyze of {images} images of {w}x{h} into {} clusters",

@@ -80,7 +80,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         btf.height() as usize,
         btf.image_count(),
     );
-    let need = |side| memory::bench_bytes(shape, args.clusters, side, !args.mrf_only);
+    let threads = memory::worker_threads();
+    let need = |side| memory::bench_bytes(shape, args.clusters, side, !args.mrf_only, threads);
     global.check_memory(
         format!("bench with --synthesis-size {}", args.synthesis_size),
         need(args.synthesis_size),

@@ -70,12 +70,14 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let side = args.size as usize;
     let images = DirectionSet::bonn().len().pow(2);
     let bench = BenchOptions::default();
+    let threads = memory::worker_threads();
     let need = |size: usize, enlarge: usize| {
         memory::bench_bytes(
             (size, size, images),
             bench.clusters,
             bench.synthesis_side,
             true,
+            threads,
         )
         .max(memory::synthesis_bytes(
             enlarge,

@@ -139,15 +139,16 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let (w, h) = (btf.width() as usize, btf.height() as usize);
     let (nv, nl) = (btf.views().len(), btf.lights().len());
     let held = |method| if method == Method::PcaRf { nl } else { nv * nl };
+    let threads = memory::worker_threads();
     global.check_memory(
         format!(
             "lpca --method {} of {} images of {w}x{h}",
             method.name(),
             nv * nl
         ),
-        memory::lpca_bytes(w, h, held(method)),
+        memory::lpca_bytes(w, h, held(method), threads),
         |budget| {
-            if method != Method::PcaRf && memory::lpca_bytes(w, h, nl) <= budget {
+            if method != Method::PcaRf && memory::lpca_bytes(w, h, nl, threads) <= budget {
                 "--method pca-rf (one view at a time) fits".into()
             } else {
                 "the images are too large for this budget".into()

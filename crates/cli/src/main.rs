@@ -78,14 +78,15 @@ impl Global {
     }
 
     /// Refuses a `rows` x `cols` synthesis drawing on `subspaces` subspace images over the
-    /// budget (`bytes` is [`memory::synthesis_bytes`] or [`memory::btf_synthesis_bytes`]),
+    /// budget (`bytes` is [`memory::synthesis_bytes`] or [`memory::btf_synthesis_bytes`] on this
+    /// process's worker threads),
     /// naming the largest square `option` size that fits.
     pub fn check_synthesis(
         &self,
         option: &str,
         (rows, cols): (usize, usize),
         subspaces: usize,
-        bytes: fn(usize, usize, usize) -> u64,
+        bytes: impl Fn(usize, usize, usize) -> u64,
     ) -> Result<(), OverBudget> {
         let need = bytes(rows, cols, subspaces);
         self.check_memory(format!("{option} {cols}x{rows}"), need, |budget| {

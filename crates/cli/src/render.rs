@@ -155,11 +155,13 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         let model = format::read(&args.model)?;
         // The subspace images are synthesized at the tile's side, whatever the texture size.
         let texture = args.tile;
+        let threads = memory::worker_threads();
         let need = |side| {
             memory::render_bytes(
                 width as usize * height as usize,
                 side,
                 model.subspaces().len(),
+                threads,
             )
         };
         global.check_memory(

@@ -192,7 +192,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             needed.extend(model.subspace_weights(v, l)?.into_keys());
         }
     }
-    let bytes = memory::btf_synthesis_bytes;
+    let threads = memory::worker_threads();
+    let bytes = |rows, cols, subspaces| memory::btf_synthesis_bytes(rows, cols, subspaces, threads);
     global.check_synthesis("--size", (rows, cols), needed.len(), bytes)?;
     let btf = ModelImages::into_btf(model, views, lights, &options)?;
     io::write_btf(

@@ -432,7 +432,7 @@ fn estimates_bound_the_measured_peaks() {
     assert_eq!(code, 0, "{err}");
     check_estimate(
         "analyze 16^2",
-        btfmrf::memory::analysis_bytes(16, 16, images, 8),
+        btfmrf::memory::analysis_bytes(16, 16, images, 8, btfmrf::memory::worker_threads()),
         peak,
     );
 
@@ -456,7 +456,7 @@ fn estimates_bound_the_measured_peaks() {
     let all = m.subspaces().len();
     check_estimate(
         "synthesize a 256^2 BTF",
-        btfmrf::memory::btf_synthesis_bytes(256, 256, all),
+        btfmrf::memory::btf_synthesis_bytes(256, 256, all, btfmrf::memory::worker_threads()),
         peak,
     );
 
@@ -473,7 +473,7 @@ fn estimates_bound_the_measured_peaks() {
     assert_eq!(code, 0, "{err}");
     check_estimate(
         "lpca 16^2",
-        btfmrf::memory::lpca_bytes(16, 16, images),
+        btfmrf::memory::lpca_bytes(16, 16, images, btfmrf::memory::worker_threads()),
         peak,
     );
 
@@ -495,7 +495,7 @@ fn estimates_bound_the_measured_peaks() {
     assert_eq!(code, 0, "{err}");
     check_estimate(
         "render, 512^2 tile",
-        btfmrf::memory::render_bytes(256 * 256, 512, all),
+        btfmrf::memory::render_bytes(256 * 256, 512, all, btfmrf::memory::worker_threads()),
         peak,
     );
 }
