@@ -10,7 +10,9 @@
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
 //! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--no-light-tables] [--no-light-chroma] [--no-light-weights] [--verbose]
 //! [--sheet DIR] [--seed N] [--pair-rank K] [--shadows attached|cast|auto]
-//! [--coarse laid|mrf|auto] [--view N] [--halfway]`; `--view N` judges in the Bonn set's
+//! [--coarse laid|mrf|auto] [--view N] [--halfway] [--quilted-measured]`; `--quilted-measured`
+//! judges, instead of the synthesis, the measured image itself quilted on the model's range
+//! map (an oracle: what the quilt's layout alone costs; needs a range map at every pixel); `--view N` judges in the Bonn set's
 //! view N instead of the frontal view 0 (1-6 at 15 degrees, 7-18 at 30, 19-36 at 45, 37-60 at
 //! 60, 61-80 at 75; not with `--halfway`); `--halfway` judges at nine lights halfway between
 //! measured ones instead, the references rendered there by the generator (what the model does
@@ -180,6 +182,38 @@ fn match_lightness(image: &mut Array3<f32>, target: &[f64]) {
     }
 }
 
+/// The oracle of `--quilted-measured`: the measured image itself quilted to `rows` x `cols`
+/// on the model's range map as the guide, its L*, a* and b* the matched companions, with the
+/// synthesis seed: what the quilt alone costs, whatever the model's appearance.
+fn quilted(
+    model: &btfmrf::model::MaterialModel,
+    measured: &Array3<f32>,
+    (rows, cols): (usize, usize),
+    seed: u64,
+) -> Result<Array3<f32>, Box<dyn std::error::Error>> {
+    let map = model
+        .range_map()
+        .filter(|m| m.step == 1 && (m.rows, m.cols) == (measured.dim().1, measured.dim().2))
+        .ok_or("--quilted-measured needs a range map of one sample per measured pixel")?;
+    let lab = ColourSpace::Lab.planes(measured);
+    let (_, placement) = btfmrf::geometry::quilt::quilt_laid(
+        &map.samples(),
+        &lab,
+        &[0, 1, 2],
+        (rows, cols),
+        seed,
+        None,
+    );
+    let mut image = Array3::zeros((3, rows, cols));
+    for c in 0..3 {
+        let laid = placement.lay(&measured.index_axis(ndarray::Axis(0), c).mapv(f64::from));
+        image
+            .index_axis_mut(ndarray::Axis(0), c)
+            .assign(&laid.mapv(|v| v as f32));
+    }
+    Ok(image)
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let mut materials = Vec::new();
@@ -192,6 +226,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut halfway = false;
     let mut size: u32 = 128;
     let mut enlarge: u32 = 1;
+    let mut quilted_measured = false;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--clusters" => options.clusters = args.next().ok_or("--clusters N")?.parse()?,
@@ -224,6 +259,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
             }
             "--verbose" => verbose = true,
+            "--quilted-measured" => quilted_measured = true,
             "--halfway" => halfway = true,
             "--seed" => seed = args.next().ok_or("--seed N")?.parse()?,
             "--size" => size = args.next().ok_or("--size N")?.parse()?,
@@ -310,7 +346,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 Some(&sets.2.image(dv, l)?),
                 1,
             )?;
-            let mut image = model.image_from_cache(&cache, &view, &light)?;
+            let mut image = if quilted_measured {
+                quilted(&model, &measured, (o.rows, o.cols), seed)?
+            } else {
+                model.image_from_cache(&cache, &view, &light)?
+            };
             if let Some(t) = &tables {
                 match_lightness(&mut image, &t[l]);
             }
