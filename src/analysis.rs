@@ -935,11 +935,8 @@ fn judged_coarse(btf: &Btf) -> bool {
 /// sponge, knit: laid against MRF 0.618 / 0.608, 0.561 / 0.570, 0.350 / 0.356, and within
 /// 0.04 of the another-crop level of each other over seeds 1-4, nine lights); on the leather
 /// the laid crops' was 14 % closer (0.555 / 0.647; nine lights, seeds 1-4: x1.26 against
-/// x1.44). At 0.95 the stones' near tie tipped to the laid crops once their deviations kept
-/// finer steps (format version 21), and nine lights judged that worse (seeds 1-4: x1.22 /
-/// 1.39 against x1.16 / 1.32 / 1.23 / 1.20 with the MRF's, seeds 1-2 for the laid): a tenth
-/// keeps that tie with the MRF and still takes a clear gain like the leather's.
-const LAID_COARSE_GAIN: f64 = 0.90;
+/// x1.44).
+const LAID_COARSE_GAIN: f64 = 0.95;
 
 /// Subspace representatives at most on which analysis judges the exemplar (whether it helps
 /// beside a range map, and where its coarse L* comes from). Per pair, two syntheses'
@@ -1660,7 +1657,7 @@ fn exemplar_from(
             deviations(budget.lightness, (field, field.div_ceil(2))),
             EXEMPLAR_RESIDUAL,
         ),
-        (format::as_stored_bytes, format::as_stored_levels),
+        (format::as_stored_bytes, format::as_stored_nibbles),
     );
     let light_weights = lights.map(|l| LightWeights {
         view: l.view,
@@ -1703,7 +1700,7 @@ fn exemplar_from(
         cols,
         step: texel_step,
         lightness,
-        deviation_codes: DeviationCodes::Levels,
+        deviation_codes: DeviationCodes::Nibble,
         chroma,
         // As synthesis before format version 11; [`judged_exemplar`] chooses.
         coarse: CoarseSource::Mrf,

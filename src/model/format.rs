@@ -34,10 +34,8 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// chroma spreads), version 13 files (an exemplar at every texel), version 14 files (no
 /// light weights on the exemplar), version 15 files (no light weights on the periods),
 /// version 16 files (no light chroma tables), version 17 files (no exemplar light weights
-/// on a lattice), version 18 files (period deviations at 16 bits), version 19 files (period
-/// deviations in three colour planes) and version 20 files (exemplar L* deviations at 4-bit
-/// codes on an even step) are still read.
-pub const VERSION: u16 = 21;
+/// on a lattice) and version 18 files (period deviations at 16 bits) are still read.
+pub const VERSION: u16 = 20;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.
@@ -547,7 +545,7 @@ fn write_colour(w: &mut Writer, model: &MaterialModel) {
             w.u16(e.cols as u16);
             // Version 9: the code width of the L* deviations.
             let deviations = Storage::of(e.deviation_codes);
-            w.u8(deviations.tag());
+            w.u8(deviations.bits());
             // Version 11: where the L* coarser than half a patch comes from.
             w.u8(match e.coarse {
                 CoarseSource::Mrf => 0,
@@ -632,10 +630,7 @@ fn principal_bytes(p: &Principal, storage: (Storage, Storage)) -> usize {
         .basis
         .iter()
         .enumerate()
-        .map(|(j, b)| {
-            let storage = if j == 0 { storage.0 } else { storage.1 };
-            storage.header_bytes() + storage.code_bytes(b.len())
-        })
+        .map(|(j, b)| 8 + if j == 0 { storage.0 } else { storage.1 }.code_bytes(b.len()))
         .sum::<usize>()
         + 4 * p.weights.iter().map(Vec::len).sum::<usize>()
 }
@@ -779,16 +774,9 @@ enum Storage {
     /// an L* unit, below what the eye tells apart).
     Byte,
     /// 4-bit codes, two a byte (the first in the low half), held in single precision (the
-    /// exemplar's L* deviations in versions 9 to 20).
+    /// exemplar's L* deviations from version 9).
     Nibble,
-    /// 4-bit codes as [`Storage::Nibble`] into a table of [`LEVELS`] single-precision
-    /// levels written before them instead of a low value and a step (the exemplar's L*
-    /// deviations from version 21; see [`level_table`]).
-    Levels,
 }
-
-/// Levels a [`Storage::Levels`] table holds: one per 4-bit code.
-const LEVELS: usize = 16;
 
 impl Storage {
     /// How an exemplar's deviations with these codes are stored.
@@ -796,24 +784,6 @@ impl Storage {
         match codes {
             DeviationCodes::Byte => Storage::Byte,
             DeviationCodes::Nibble => Storage::Nibble,
-            DeviationCodes::Levels => Storage::Levels,
-        }
-    }
-
-    /// The byte a file names an exemplar's deviation codes by: the code width, or 16 for a
-    /// table of 16 levels.
-    fn tag(self) -> u8 {
-        match self {
-            Storage::Levels => LEVELS as u8,
-            other => other.bits(),
-        }
-    }
-
-    /// Bytes before the codes: a low value and a step, or the table of levels.
-    fn header_bytes(self) -> usize {
-        match self {
-            Storage::Levels => 4 * LEVELS,
-            _ => 8,
         }
     }
 
@@ -822,16 +792,14 @@ impl Storage {
         match self {
             Storage::Single | Storage::Double => 16,
             Storage::Byte => 8,
-            Storage::Nibble | Storage::Levels => 4,
+            Storage::Nibble => 4,
         }
     }
 
     /// A decoded value as the reader keeps it.
     fn held(self, v: f64) -> f64 {
         match self {
-            Storage::Single | Storage::Byte | Storage::Nibble | Storage::Levels => {
-                f64::from(v as f32)
-            }
+            Storage::Single | Storage::Byte | Storage::Nibble => f64::from(v as f32),
             Storage::Double => v,
         }
     }
@@ -841,7 +809,7 @@ impl Storage {
         match self {
             Storage::Single | Storage::Double => 2 * count,
             Storage::Byte => count,
-            Storage::Nibble | Storage::Levels => count.div_ceil(2),
+            Storage::Nibble => count.div_ceil(2),
         }
     }
 
@@ -856,7 +824,7 @@ impl Storage {
     /// decoded value re-quantises to its own code: a few of the held precision's units.
     fn resolution(self) -> f64 {
         match self {
-            Storage::Single | Storage::Byte | Storage::Nibble | Storage::Levels => 2f64.powi(-22),
+            Storage::Single | Storage::Byte | Storage::Nibble => 2f64.powi(-22),
             Storage::Double => 2f64.powi(-36),
         }
     }
@@ -924,21 +892,8 @@ pub fn as_stored_nibbles(values: &[f32]) -> Vec<f32> {
     stored_as(values, Storage::Nibble)
 }
 
-/// The exemplar's L* deviations as a version 21 file stores (4-bit codes into a table of 16
-/// levels, [`level_table`]) and reads them back.
-pub fn as_stored_levels(values: &[f32]) -> Vec<f32> {
-    stored_as(values, Storage::Levels)
-}
-
 fn stored_as(values: &[f32], storage: Storage) -> Vec<f32> {
     let wide: Vec<f64> = values.iter().map(|&v| f64::from(v)).collect();
-    if let Storage::Levels = storage {
-        let levels = level_table(&wide);
-        return level_codes(&wide, &levels)
-            .into_iter()
-            .map(|c| levels[usize::from(c)])
-            .collect();
-    }
     let (low, step, codes) = quantised_codes(&wide, storage);
     codes
         .into_iter()
@@ -968,76 +923,21 @@ fn quantised_codes(values: &[f64], storage: Storage) -> (f32, f32, Vec<u16>) {
     (low, step, codes)
 }
 
-/// The table of levels [`Storage::Levels`] writes for `values`: their own distinct values
-/// (in single precision, ascending, the last repeated) when at most [`LEVELS`], so that a
-/// model read and written again keeps its values and bytes; else levels spaced evenly in the
-/// signed square root `c |c|` between those of the smallest and largest value. An exemplar's
-/// deviation is mostly small with long tails (a stone's smooth top against its grout lines):
-/// a step even in the value spent most codes on the tails and drew a stone's top in terraces
-/// of one code each, where the square root keeps steps fine near zero and coarse in the tails.
-fn level_table(values: &[f64]) -> [f32; LEVELS] {
-    let mut distinct: Vec<f32> = values.iter().map(|&v| v as f32).collect();
-    distinct.sort_by(f32::total_cmp);
-    distinct.dedup();
-    if distinct.len() <= LEVELS {
-        let last = distinct.last().copied().unwrap_or(0.0);
-        return std::array::from_fn(|k| distinct.get(k).copied().unwrap_or(last));
-    }
-    let root = |v: f32| {
-        let v = f64::from(v);
-        v.signum() * v.abs().sqrt()
-    };
-    let (lo, hi) = (root(distinct[0]), root(distinct[distinct.len() - 1]));
-    std::array::from_fn(|k| {
-        let c = lo + (hi - lo) * k as f64 / (LEVELS - 1) as f64;
-        (c * c.abs()) as f32
-    })
-}
-
-/// Per value, the code of its nearest level in the ascending table `levels` (the first of
-/// equal ones).
-fn level_codes(values: &[f64], levels: &[f32; LEVELS]) -> Vec<u16> {
-    values
-        .iter()
-        .map(|&v| {
-            let above = levels
-                .partition_point(|&l| f64::from(l) < v)
-                .min(LEVELS - 1);
-            let below = above.saturating_sub(1);
-            let nearer_below =
-                (v - f64::from(levels[below])).abs() <= (f64::from(levels[above]) - v).abs();
-            let k = if nearer_below { below } else { above };
-            // The first of a run of equal levels.
-            levels.partition_point(|&l| l < levels[k]) as u16
-        })
-        .collect()
-}
-
 /// Values as `f32` low, `f32` quantum and one code each (see [`quantised_codes`]): `u8`
 /// for [`Storage::Byte`], two a byte for [`Storage::Nibble`] (an odd count's last high half
-/// zero), else `u16`; for [`Storage::Levels`], the table of levels ([`level_table`]) and
-/// 4-bit codes into it.
+/// zero), else `u16`.
 fn write_quantised(w: &mut Writer, values: &[f64], storage: Storage) {
-    if let Storage::Levels = storage {
-        let levels = level_table(values);
-        levels.iter().for_each(|&l| w.f32(f64::from(l)));
-        write_nibbles(w, &level_codes(values, &levels));
-        return;
-    }
     let (low, step, codes) = quantised_codes(values, storage);
     w.f32(f64::from(low));
     w.f32(f64::from(step));
     match storage {
         Storage::Byte => codes.iter().for_each(|&c| w.u8(c as u8)),
-        Storage::Nibble | Storage::Levels => write_nibbles(w, &codes),
+        Storage::Nibble => {
+            for pair in codes.chunks(2) {
+                w.u8((pair[0] | pair.get(1).map_or(0, |&c| c << 4)) as u8);
+            }
+        }
         Storage::Single | Storage::Double => codes.iter().for_each(|&c| w.u16(c)),
-    }
-}
-
-/// 4-bit codes, two a byte, the first in the low half (an odd count's last high half zero).
-fn write_nibbles(w: &mut Writer, codes: &[u16]) {
-    for pair in codes.chunks(2) {
-        w.u8((pair[0] | pair.get(1).map_or(0, |&c| c << 4)) as u8);
     }
 }
 
@@ -1313,27 +1213,23 @@ fn read_quantised(
     storage: Storage,
     what: &str,
 ) -> Parse<(f64, Vec<f64>)> {
-    if let Storage::Levels = storage {
-        let levels = r.f32s(LEVELS)?;
-        if levels.iter().any(|l| !(*l as f32).is_finite()) {
-            return Err(format!("{what}: a level beyond single precision"));
-        }
-        if levels.windows(2).any(|w| w[1] < w[0]) {
-            return Err(format!("{what}: levels not increasing"));
-        }
-        let codes = read_nibbles(r, count, what)?;
-        return Ok((
-            0.0,
-            codes.into_iter().map(|c| levels[usize::from(c)]).collect(),
-        ));
-    }
     let (lo, quantum) = (r.f32()?, r.f32()?);
     r.ensure(storage.code_bytes(count), 1, what)?;
     let codes: Vec<u16> = match storage {
         Storage::Byte => (0..count)
             .map(|_| r.u8().map(u16::from))
             .collect::<Parse<_>>()?,
-        Storage::Nibble | Storage::Levels => read_nibbles(r, count, what)?,
+        Storage::Nibble => {
+            let mut codes = Vec::with_capacity(count + 1);
+            for _ in 0..count.div_ceil(2) {
+                let byte = r.u8()?;
+                codes.extend([u16::from(byte & 0x0f), u16::from(byte >> 4)]);
+            }
+            if codes.len() > count && codes.pop() != Some(0) {
+                return Err(format!("{what}: the last byte's unused half is not zero"));
+            }
+            codes
+        }
         Storage::Single | Storage::Double => (0..count).map(|_| r.u16()).collect::<Parse<_>>()?,
     };
     let values = codes
@@ -1341,21 +1237,6 @@ fn read_quantised(
         .map(|code| decode(lo, quantum, code, what))
         .collect::<Parse<_>>()?;
     Ok((quantum, values))
-}
-
-/// `count` 4-bit codes, two a byte (see [`write_nibbles`]); the last byte's unused half of
-/// an odd count must be zero.
-fn read_nibbles(r: &mut Reader, count: usize, what: &str) -> Parse<Vec<u16>> {
-    r.ensure(count.div_ceil(2), 1, what)?;
-    let mut codes = Vec::with_capacity(count + 1);
-    for _ in 0..count.div_ceil(2) {
-        let byte = r.u8()?;
-        codes.extend([u16::from(byte & 0x0f), u16::from(byte >> 4)]);
-    }
-    if codes.len() > count && codes.pop() != Some(0) {
-        return Err(format!("{what}: the last byte's unused half is not zero"));
-    }
-    Ok(codes)
 }
 
 /// Reads a quantised table of `count` values (see [`write_quantised`]): a step >= 0, finite,
@@ -1455,12 +1336,7 @@ fn read_exemplar(r: &mut Reader, clusters: usize, version: u16) -> Parse<Option<
                 match r.u8()? {
                     8 => DeviationCodes::Byte,
                     4 => DeviationCodes::Nibble,
-                    16 if version >= 21 => DeviationCodes::Levels,
-                    b => {
-                        return Err(format!(
-                            "exemplar deviation codes {b} (8 or 4 bits, or 16 levels)"
-                        ));
-                    }
+                    b => return Err(format!("exemplar deviations of {b} bits (8 or 4)")),
                 }
             } else {
                 DeviationCodes::Byte
@@ -1775,85 +1651,6 @@ mod tests {
         assert!(e.contains("unused half"), "{e}");
         // Too few bytes for the codes: an error before anything is read.
         assert!(read_quantised(&mut Reader::new(&bytes[..11]), 7, Storage::Nibble, "v").is_err());
-    }
-
-    #[test]
-    fn levels_keep_a_long_tailed_deviation_fine_near_zero() {
-        // A stone's smooth top (a slow ramp within +-1) and a few grout pixels at +-30.
-        let mut values: Vec<f32> = (0..2000).map(|i| i as f32 / 1000.0 - 1.0).collect();
-        values.extend([30.0, -30.0, 29.0, -28.0]);
-        let body = |stored: &[f32]| {
-            let mut b: Vec<f32> = stored[..2000].to_vec();
-            b.sort_by(f32::total_cmp);
-            b.dedup();
-            b.len()
-        };
-        let (even, levels) = (as_stored_nibbles(&values), as_stored_levels(&values));
-        // An even step of 4 over the range puts the whole ramp on one or two codes.
-        assert!(body(&even) <= 2, "{}", body(&even));
-        assert!(body(&levels) >= 4, "{}", body(&levels));
-        let worst = |stored: &[f32]| {
-            (values[..2000].iter().zip(stored))
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0f32, f32::max)
-        };
-        assert!(
-            worst(&levels) < 0.5 * worst(&even),
-            "{} {}",
-            worst(&levels),
-            worst(&even)
-        );
-        // The tails keep their extremes.
-        assert_eq!((levels[2000], levels[2001]), (30.0, -30.0));
-
-        // Written and read back: the values as analysis keeps them; written again, the same
-        // bytes (the table is then the values' own distinct levels).
-        let wide = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<_>>();
-        let mut w = Writer::default();
-        write_quantised(&mut w, &wide(&values), Storage::Levels);
-        assert_eq!(
-            w.0.len(),
-            Storage::Levels.header_bytes() + values.len().div_ceil(2)
-        );
-        let (_, read) =
-            read_quantised(&mut Reader::new(&w.0), values.len(), Storage::Levels, "v").unwrap();
-        let read: Vec<f32> = read.into_iter().map(|v| v as f32).collect();
-        assert_eq!(read, levels);
-        let mut again = Writer::default();
-        write_quantised(&mut again, &wide(&read), Storage::Levels);
-        let (_, twice) = read_quantised(
-            &mut Reader::new(&again.0),
-            values.len(),
-            Storage::Levels,
-            "v",
-        )
-        .unwrap();
-        assert_eq!(twice.iter().map(|&v| v as f32).collect::<Vec<_>>(), read);
-        let mut third = Writer::default();
-        write_quantised(&mut third, &twice, Storage::Levels);
-        assert_eq!(third.0, again.0, "a fixed point from the first read");
-
-        // Hostile tables: a level out of order or not finite is refused in one line.
-        let mut swapped = w.0.clone();
-        swapped[..4].copy_from_slice(&1e9f32.to_le_bytes());
-        let e = read_quantised(
-            &mut Reader::new(&swapped),
-            values.len(),
-            Storage::Levels,
-            "v",
-        )
-        .unwrap_err();
-        assert!(e.contains("not increasing"), "{e}");
-        let mut nan = w.0.clone();
-        nan[4..8].copy_from_slice(&f32::NAN.to_le_bytes());
-        assert!(
-            read_quantised(&mut Reader::new(&nan), values.len(), Storage::Levels, "v").is_err()
-        );
-        // Too few bytes for the codes.
-        let short = &w.0[..w.0.len() - 1];
-        assert!(
-            read_quantised(&mut Reader::new(short), values.len(), Storage::Levels, "v").is_err()
-        );
     }
 
     #[test]

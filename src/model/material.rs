@@ -494,13 +494,6 @@ pub enum DeviationCodes {
     /// quilted and judged): eight deviations at 16 levels score as eight unquantised ones,
     /// and six 4-bit deviations beat three 8-bit ones.
     Nibble,
-    /// 4-bit codes into a table of 16 levels spaced evenly in the signed square root of the
-    /// value (format version 21): the same bytes but a table, and steps fine near zero where
-    /// even ones drew a stone's smooth top in terraces one code apart. Measured (128^2, 20
-    /// subspaces, nine frontal lights, the model's synthesis laid at the measured layout so
-    /// that no quilt moves the figure, x the another-crop level): stones 0.91 -> 0.87, sponge
-    /// 0.60 -> 0.55, leather 0.65 -> 0.59, as with the deviations unquantised.
-    Levels,
 }
 
 /// The CIE a* and b* of an exemplar's crops, averaged over `step` x `step` blocks (chroma
