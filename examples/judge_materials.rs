@@ -10,10 +10,10 @@
 //! Run: `cargo run --release --example judge_materials -- [MATERIAL...] [--clusters N]
 //! [--model KIND] [--direction-share X] [--no-colour-tables] [--no-lit-tables] [--no-light-tables] [--no-light-chroma] [--no-light-weights] [--verbose]
 //! [--sheet DIR] [--seed N] [--pair-rank K] [--shadows attached|cast|auto]
-//! [--coarse laid|mrf|auto] [--view N] [--halfway] [--quilted-measured]`; `--quilted-measured`
-//! judges, instead of the synthesis, the measured image itself quilted on the model's range
-//! map (an oracle: what the quilt's layout alone costs; needs a range map at every pixel); `--view N` judges in the Bonn set's
-//! view N instead of the frontal view 0 (1-6 at 15 degrees, 7-18 at 30, 19-36 at 45, 37-60 at
+//! [--coarse laid|mrf|auto] [--view N] [--halfway] [--quilted-measured]`;
+//! `--quilted-measured` judges, instead of the synthesis, the measured image itself quilted on
+//! the model's range map (an oracle: what the quilt's layout alone costs; needs a range map at
+//! every pixel); `--view N` judges in the Bonn set's view N instead of the frontal view 0 (1-6 at 15 degrees, 7-18 at 30, 19-36 at 45, 37-60 at
 //! 60, 61-80 at 75; not with `--halfway`); `--halfway` judges at nine lights halfway between
 //! measured ones instead, the references rendered there by the generator (what the model does
 //! between its measured lights); `--shadows` sets the range map's shadows and `--coarse` where

@@ -21,7 +21,7 @@ const WRITER_IMAGES: u64 = 96;
 const WRITER_PER_PIXEL: u64 = 16;
 /// Bytes per pixel each worker thread holds while it relights one image of a synthesized BTF
 /// from the cached subspace images: a 256^2 BTF of four views peaked at 136 MB on one thread,
-/// 138 MB on two, 161-179 MB on four, 245-267 MB on eight and 381-383 MB on sixteen.
+/// 138 MB on two, 161-179 MB on four, 245-267 MB on eight and 381-426 MB on sixteen.
 const WRITER_PER_PIXEL_THREAD: u64 = 320;
 
 /// Bytes per measured value (texel x view x light x colour): the analysis streams the images,

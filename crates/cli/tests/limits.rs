@@ -399,6 +399,8 @@ fn estimates_bound_the_measured_peaks() {
         btfmrf::btf::Direction::new(45.0, 90.0),
     );
     let k = m.subspace_weights(&view, &light).unwrap().len();
+    // The binary runs on as many worker threads as this process.
+    let threads = btfmrf::memory::worker_threads();
     let size = 1024;
     let (code, peak, err) = measured(&[
         "synthesize",
@@ -432,7 +434,7 @@ fn estimates_bound_the_measured_peaks() {
     assert_eq!(code, 0, "{err}");
     check_estimate(
         "analyze 16^2",
-        btfmrf::memory::analysis_bytes(16, 16, images, 8, btfmrf::memory::worker_threads()),
+        btfmrf::memory::analysis_bytes(16, 16, images, 8, threads),
         peak,
     );
 
@@ -456,7 +458,7 @@ fn estimates_bound_the_measured_peaks() {
     let all = m.subspaces().len();
     check_estimate(
         "synthesize a 256^2 BTF",
-        btfmrf::memory::btf_synthesis_bytes(256, 256, all, btfmrf::memory::worker_threads()),
+        btfmrf::memory::btf_synthesis_bytes(256, 256, all, threads),
         peak,
     );
 
@@ -473,7 +475,7 @@ fn estimates_bound_the_measured_peaks() {
     assert_eq!(code, 0, "{err}");
     check_estimate(
         "lpca 16^2",
-        btfmrf::memory::lpca_bytes(16, 16, images, btfmrf::memory::worker_threads()),
+        btfmrf::memory::lpca_bytes(16, 16, images, threads),
         peak,
     );
 
@@ -495,7 +497,7 @@ fn estimates_bound_the_measured_peaks() {
     assert_eq!(code, 0, "{err}");
     check_estimate(
         "render, 512^2 tile",
-        btfmrf::memory::render_bytes(256 * 256, 512, all, btfmrf::memory::worker_threads()),
+        btfmrf::memory::render_bytes(256 * 256, 512, all, threads),
         peak,
     );
 }
