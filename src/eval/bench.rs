@@ -865,6 +865,7 @@ mod tests {
                 colour_lab_channels: [1.0; 3],
                 chroma_std: [2.0; 2],
                 chroma_kurtosis: [3.0; 2],
+                colour_coupling: 1.0,
             },
             structure_vs_crop: 1.0,
             structure_vs_random_phase: 1.0,

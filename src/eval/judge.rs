@@ -13,7 +13,9 @@
 //!   matches, so such a noise does not score like the material.
 //! - **Colour**: the CIE Lab marginals compared by exact quantiles (512 levels, no bins):
 //!   `colour_lab` is the mean over L*, a*, b* of the mean |quantile difference|, in Lab units;
-//!   also the standard deviation and kurtosis of a* and b*.
+//!   also the standard deviation and kurtosis of a* and b*, and `colour_coupling`: how far the
+//!   mean chroma at each tenth of the lightness is from the reference's (the marginals alone
+//!   miss highlights that take the colour of the shadows).
 //!
 //! Reference levels ([`Yardstick`]): the measured image is cut into two square crops, A (the
 //! reference every candidate is compared with) and B (or two samples of the material are given,
@@ -51,6 +53,9 @@ pub const MIN_SIDE: usize = 16;
 const QUANTILES: usize = 512;
 /// Standard deviation of the blur of the "blurred" reference level, pixels.
 const BLUR_SIGMA: f64 = 2.0;
+/// Lightness ranks (equal shares of the pixels) at which the colour coupling compares the mean
+/// chroma.
+const COUPLING_BINS: usize = 10;
 
 /// Names of the structure statistics' groups, in the order of [`Judgement::groups`].
 pub const STRUCTURE_GROUPS: [&str; 7] = [
@@ -71,6 +76,7 @@ pub struct Signature {
     lab_sorted: [Vec<f32>; 3],
     chroma_std: [f64; 2],
     chroma_kurtosis: [f64; 2],
+    coupling: [f64; COUPLING_BINS],
 }
 
 /// How far one image is from another (the second is the reference).
@@ -89,6 +95,9 @@ pub struct Judgement {
     pub chroma_std: [f64; 2],
     /// Kurtosis of a* and b* of the judged image (3 for a Gaussian).
     pub chroma_kurtosis: [f64; 2],
+    /// Mean |difference| of the mean chroma `sqrt(a*^2 + b*^2)` of the pixels in each tenth of
+    /// the lightness (by rank), Lab units: how colour goes with lightness.
+    pub colour_coupling: f64,
 }
 
 impl Signature {
@@ -114,12 +123,14 @@ impl Signature {
         });
         let chroma = |k: usize| moments(lab.index_axis(Axis(0), k + 1).iter().map(|&v| v as f64));
         let (ma, mb) = (chroma(0), chroma(1));
+        let coupling = chroma_by_lightness(&lab);
         Ok(Self {
             scales,
             groups: structure_statistics(&lightness.mapv(f64::from), scales),
             lab_sorted,
             chroma_std: [ma.std, mb.std],
             chroma_kurtosis: [ma.kurtosis, mb.kurtosis],
+            coupling,
         })
     }
 
@@ -146,6 +157,10 @@ impl Signature {
             colour_lab_channels,
             chroma_std: self.chroma_std,
             chroma_kurtosis: self.chroma_kurtosis,
+            colour_coupling: (self.coupling.iter().zip(&reference.coupling))
+                .map(|(a, b)| (a - b).abs())
+                .sum::<f64>()
+                / COUPLING_BINS as f64,
         }
     }
 
@@ -199,6 +214,7 @@ impl Verdict {
                 }),
                 chroma_std: std::array::from_fn(|k| avg(&|v| v.judgement.chroma_std[k])),
                 chroma_kurtosis: std::array::from_fn(|k| avg(&|v| v.judgement.chroma_kurtosis[k])),
+                colour_coupling: avg(&|v| v.judgement.colour_coupling),
             },
             structure_vs_crop: avg(&|v| v.structure_vs_crop),
             structure_vs_random_phase: avg(&|v| v.structure_vs_random_phase),
@@ -359,6 +375,25 @@ fn to_lab(image: &Array3<f32>) -> Array3<f32> {
         }
     }
     lab
+}
+
+/// The mean chroma `sqrt(a*^2 + b*^2)` of a `(3, h, w)` Lab image's pixels in each of
+/// [`COUPLING_BINS`] equal shares of them ranked by L* (ties broken by position).
+fn chroma_by_lightness(lab: &Array3<f32>) -> [f64; COUPLING_BINS] {
+    let planes: Vec<&[f32]> = (0..3)
+        .map(|k| lab.index_axis(Axis(0), k).to_slice().unwrap_or(&[]))
+        .collect();
+    let n = planes[0].len();
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&i, &j| planes[0][i].total_cmp(&planes[0][j]));
+    std::array::from_fn(|bin| {
+        let share = &order[bin * n / COUPLING_BINS..(bin + 1) * n / COUPLING_BINS];
+        let sum: f64 = share
+            .iter()
+            .map(|&i| f64::from(planes[1][i]).hypot(f64::from(planes[2][i])))
+            .sum();
+        sum / share.len().max(1) as f64
+    })
 }
 
 /// Mean |difference| of two sorted samples at [`QUANTILES`] evenly spaced probabilities
@@ -695,6 +730,33 @@ mod tests {
         let darker = im.mapv(|v| v * 0.8);
         let d = Signature::of(&darker, 2).unwrap().compare(&s);
         assert!(d.colour_lab_channels[0] > 1.0, "{d:?}");
+    }
+
+    #[test]
+    fn the_coupling_sees_colour_moved_between_light_and_dark_pixels() {
+        // Half the pixels grey, half brown, each half of mixed lightness; with grey and brown
+        // traded between the bright and the dark pixels the Lab marginals move a little (the
+        // brown's chroma scales with its lightness), how chroma goes with lightness a lot.
+        let (h, w) = (32, 64);
+        let pixel = |y: usize, x: usize, swap: bool| {
+            let bright = (x + y).is_multiple_of(2);
+            let grey = bright != swap;
+            let v = if bright { 0.6 } else { 0.15 };
+            if grey {
+                [v, v, v]
+            } else {
+                [v * 1.3, v, v * 0.6]
+            }
+        };
+        let image =
+            |swap: bool| Array3::from_shape_fn((3, h, w), |(c, y, x)| pixel(y, x, swap)[c] as f32);
+        let (kept, traded) = (image(false), image(true));
+        let s = Signature::of(&kept, 2).unwrap();
+        assert_eq!(s.compare(&s).colour_coupling, 0.0);
+        let shuffled = Signature::of(&shuffle(&kept, 4), 2).unwrap().compare(&s);
+        assert!(shuffled.colour_coupling < 1e-9, "{shuffled:?}");
+        let d = Signature::of(&traded, 2).unwrap().compare(&s);
+        assert!(d.colour_coupling > 4.0 * d.colour_lab, "{d:?}");
     }
 
     #[test]

@@ -34,8 +34,9 @@ pub const MAGIC: [u8; 4] = *b"BTFM";
 /// chroma spreads), version 13 files (an exemplar at every texel), version 14 files (no
 /// light weights on the exemplar), version 15 files (no light weights on the periods),
 /// version 16 files (no light chroma tables), version 17 files (no exemplar light weights
-/// on a lattice) and version 18 files (period deviations at 16 bits) are still read.
-pub const VERSION: u16 = 20;
+/// on a lattice), version 18 files (period deviations at 16 bits) and version 20 files (at
+/// most 8 exemplar deviations) are still read.
+pub const VERSION: u16 = 21;
 /// The largest payload accepted, bytes (a model is tens of kilobytes).
 pub const MAX_PAYLOAD: u32 = 16 << 20;
 /// The most pyramid levels accepted.

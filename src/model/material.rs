@@ -402,8 +402,9 @@ impl PeriodicPart {
     }
 }
 
-/// Most principal deviations the subspace images' exemplar crops are stored with.
-pub const MAX_EXEMPLAR_COMPONENTS: usize = 8;
+/// Most principal deviations the subspace images' exemplar crops are stored with (8 before
+/// format version 21).
+pub const MAX_EXEMPLAR_COMPONENTS: usize = 16;
 
 /// The largest [`Exemplar::step`].
 pub const MAX_EXEMPLAR_STEP: usize = 16;

@@ -192,8 +192,8 @@ pub struct Args {
     /// patches, so each stone or thread keeps its own colour. Default: 360 for a photograph
     /// (one subspace image, one crop of 127 KiB; a larger crop gives the quilt more to choose
     /// from: the three grey photographs' models take 77-120 KB, at most about 135 KB),
-    /// 128 for several subspace images (the mean, 16 KiB, and up to six deviations, 8 KiB
-    /// each).
+    /// 128 for several subspace images (the mean, 16 KiB, and up to sixteen deviations, 8 KiB
+    /// each, of which `--max-bytes` keeps what fits).
     /// Stored when there is no range map (a photograph), and beside a range map when a check
     /// at analysis finds it brings the synthesis closer to the measured images. The exemplar
     /// then covers the range map's region, a centred window (at most 128 x 128) at every pixel
