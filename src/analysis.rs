@@ -198,8 +198,11 @@ pub struct AnalysisReport {
     /// Every repair of an unstable or invalid band estimate, with where it happened, and a
     /// range map that could not be estimated.
     pub repairs: Vec<AnalysisRepair>,
-    /// Doubts about the input that do not stop the analysis (e.g. not a stationary texture).
+    /// Doubts about the input that do not stop the analysis (e.g. not a stationary texture),
+    /// and a model that stays over its byte limit.
     pub warnings: Vec<String>,
+    /// Choices worth knowing that are not problems (e.g. what the byte limit cut).
+    pub notes: Vec<String>,
 }
 
 /// A repair analysis made. `Display` gives the message users see; it serializes as that
@@ -693,8 +696,12 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
     let model = judged_exemplar(btf, model, &judged, options.coarse, judged_bytes)?;
     let model = judged_colour_tables(btf, model, &judged, judged_bytes)?;
     let model = with_pair_gains(model, &measured_luminance)?;
-    let (model, trimmed) = within_budget(model, options.max_bytes, &measured_luminance)?;
-    report.warnings.extend(trimmed);
+    let (model, said) = within_budget(model, options.max_bytes, &measured_luminance)?;
+    match said {
+        Budgeted::Whole => {}
+        Budgeted::Cut(note) => report.notes.push(note),
+        Budgeted::Over(warning) => report.warnings.push(warning),
+    }
     Ok(Analysed {
         model,
         report,
@@ -1008,18 +1015,18 @@ pub const MODEL_BUDGET: usize = 150_000;
 /// where that alone brings it within, else its exemplar's last principal deviations, L* first,
 /// 8 KiB each at a 128 x 128 crop, then chroma), and where deviations went, the pair gains
 /// measured again on what synthesis now makes (once per cut, not per deviation: dropped one
-/// at a time with the gains measured after each, the built-in leather took 13 s more to
-/// analyse with sixteen deviations to cut). The 3D CAR's larger band models put the built-in
+/// at a time with the gains measured after each, the built-in leather's judge run took 29.9 s
+/// with sixteen deviations to cut, against 14.9-15.7 s). The 3D CAR's larger band models put the built-in
 /// sponge and leather at 154 KB with three L* deviations; the leather's 3D CAR model at 149.4
-/// KB before the chroma tables (2.4 KB deflated) drops them and keeps its deviations. Also a
-/// note saying what was dropped, or that the model still does not fit.
+/// KB before the chroma tables (2.4 KB deflated) drops them and keeps its deviations. Also
+/// what was dropped, or that the model still does not fit.
 fn within_budget(
     mut model: MaterialModel,
     max_bytes: Option<usize>,
     measured: &[f64],
-) -> Result<(MaterialModel, Option<String>)> {
+) -> Result<(MaterialModel, Budgeted)> {
     let Some(max) = max_bytes else {
-        return Ok((model, None));
+        return Ok((model, Budgeted::Whole));
     };
     let mut cut = Cut::default();
     let bytes = loop {
@@ -1043,10 +1050,10 @@ fn within_budget(
         let note = format!(
             "the model takes {bytes} bytes, over the {max} asked for, with nothing left to drop (fewer --clusters make it smaller)"
         );
-        return Ok((model, Some(note)));
+        return Ok((model, Budgeted::Over(note)));
     }
     let what = match (cut.deviations, cut.light_chroma) {
-        (0, false) => return Ok((model, None)),
+        (0, false) => return Ok((model, Budgeted::Whole)),
         (0, true) => "the light chroma tables".to_string(),
         (d, false) => format!("{d} of the exemplar's principal deviations"),
         (d, true) => {
@@ -1055,10 +1062,20 @@ fn within_budget(
     };
     Ok((
         model,
-        Some(format!(
+        Budgeted::Cut(format!(
             "dropped {what} to keep the model within {max} bytes (now {bytes}; --max-bytes sets the limit)"
         )),
     ))
+}
+
+/// What keeping a model within its byte limit did ([`within_budget`]).
+enum Budgeted {
+    /// It fitted whole.
+    Whole,
+    /// It fits now; what was dropped (a note: the limit at work, not a problem).
+    Cut(String),
+    /// Nothing left to drop and still over the limit (a warning).
+    Over(String),
 }
 
 /// What [`trimmed`] took out of a model, and what it left.
@@ -1077,40 +1094,79 @@ struct Cut {
 /// `model` cut to at most `max_bytes` as written (`None`: left whole), its pair gains as they
 /// are: without its light chroma tables where that alone makes it fit (a principal deviation
 /// holds more of the material than they do), else without its exemplar's last principal
-/// deviations until it fits or none is left.
-fn trimmed(mut model: MaterialModel, max_bytes: Option<usize>) -> Result<(MaterialModel, Cut)> {
-    let mut cut = Cut {
-        bytes: format::to_bytes(&model).len(),
+/// deviations until it fits or none is left. The fewest deviations to drop are found by
+/// bisection (the bytes shrink with every deviation dropped), so a model is written a few
+/// times rather than once a deviation.
+fn trimmed(model: MaterialModel, max_bytes: Option<usize>) -> Result<(MaterialModel, Cut)> {
+    let bytes = format::to_bytes(&model).len();
+    let whole = Cut {
+        bytes,
+        fits: true,
         ..Cut::default()
     };
-    let Some(max) = max_bytes else {
-        cut.fits = true;
-        return Ok((model, cut));
+    let Some(max) = max_bytes.filter(|&max| bytes > max) else {
+        return Ok((model, whole));
     };
-    while cut.bytes > max {
-        if let Some(lean) = without_light_chroma(&model)? {
-            let bytes = format::to_bytes(&lean).len();
-            if bytes <= max {
-                let cut = Cut {
-                    light_chroma: true,
-                    fits: true,
-                    bytes,
-                    ..cut
-                };
-                return Ok((lean, cut));
-            }
+    // The model with `k` deviations dropped, fitting with or without its tables, or `None`.
+    let fitting = |k: usize| -> Result<Option<(MaterialModel, Cut)>> {
+        let (fewer, _) = dropping(&model, k)?;
+        let bytes = format::to_bytes(&fewer).len();
+        let cut = Cut {
+            deviations: k,
+            fits: true,
+            bytes,
+            light_chroma: false,
+        };
+        if bytes <= max {
+            return Ok(Some((fewer, cut)));
         }
-        let mut parts = model.into_parts();
-        let dropped = (parts.exemplar.as_mut()).is_some_and(Exemplar::drop_deviation);
-        model = MaterialModel::new(parts)?;
-        if !dropped {
-            return Ok((model, cut));
+        let Some(lean) = without_light_chroma(&fewer)? else {
+            return Ok(None);
+        };
+        let bytes = format::to_bytes(&lean).len();
+        Ok((bytes <= max).then_some((
+            lean,
+            Cut {
+                light_chroma: true,
+                bytes,
+                ..cut
+            },
+        )))
+    };
+    let (bare, droppable) = dropping(&model, usize::MAX)?;
+    let Some(mut found) = fitting(droppable)? else {
+        let bytes = format::to_bytes(&bare).len();
+        let cut = Cut {
+            deviations: droppable,
+            fits: false,
+            bytes,
+            light_chroma: false,
+        };
+        return Ok((bare, cut));
+    };
+    // `found` fits at `hi` deviations dropped; nothing fits below `lo`.
+    let (mut lo, mut hi) = (0, droppable);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        match fitting(mid)? {
+            Some(at) => (found, hi) = (at, mid),
+            None => lo = mid + 1,
         }
-        cut.deviations += 1;
-        cut.bytes = format::to_bytes(&model).len();
     }
-    cut.fits = true;
-    Ok((model, cut))
+    Ok(found)
+}
+
+/// `model` with up to `k` of its exemplar's last principal deviations dropped, and how many
+/// were.
+fn dropping(model: &MaterialModel, k: usize) -> Result<(MaterialModel, usize)> {
+    let mut parts = model.clone().into_parts();
+    let mut dropped = 0;
+    if let Some(exemplar) = parts.exemplar.as_mut() {
+        while dropped < k && exemplar.drop_deviation() {
+            dropped += 1;
+        }
+    }
+    Ok((MaterialModel::new(parts)?, dropped))
 }
 
 /// `model` without its light chroma tables; `None` when it has none.
@@ -2188,6 +2244,14 @@ mod tests {
         assert!(cut.fits && cut.bytes <= max && cut.bytes == format::to_bytes(&fewer).len());
         assert!(cut.deviations >= 1);
         assert_eq!(deviations(&fewer), kept - cut.deviations);
+        // ... and no fewer would fit, with the tables or without them.
+        let (one_fewer, _) = dropping(&whole, cut.deviations - 1).unwrap();
+        let lean = without_light_chroma(&one_fewer)
+            .unwrap()
+            .expect("light chroma");
+        for model in [&one_fewer, &lean] {
+            assert!(format::to_bytes(model).len() > max);
+        }
         let (e, f) = (whole.exemplar().unwrap(), fewer.exemplar().unwrap());
         assert_eq!(
             f.lightness.basis[..],

@@ -30,7 +30,7 @@
 //! Band statistics are computed on a mirrored copy (so the borders make no seam) over the
 //! image's own pixels.
 
-use ndarray::{Array2, Array3, Axis, s};
+use ndarray::{Array2, Array3, Axis, Zip, s};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_distr::{Distribution, StandardNormal};
@@ -380,18 +380,19 @@ fn to_lab(image: &Array3<f32>) -> Array3<f32> {
 /// The mean chroma `sqrt(a*^2 + b*^2)` of a `(3, h, w)` Lab image's pixels in each of
 /// [`COUPLING_BINS`] equal shares of them ranked by L* (ties broken by position).
 fn chroma_by_lightness(lab: &Array3<f32>) -> [f64; COUPLING_BINS] {
-    let planes: Vec<&[f32]> = (0..3)
-        .map(|k| lab.index_axis(Axis(0), k).to_slice().unwrap_or(&[]))
+    let plane = |k: usize| lab.index_axis(Axis(0), k);
+    // (L*, chroma) per pixel, sorted by L*.
+    let mut pixels: Vec<(f32, f64)> = Zip::from(&plane(0))
+        .and(&plane(1))
+        .and(&plane(2))
+        .map_collect(|&l, &a, &b| (l, f64::from(a).hypot(f64::from(b))))
+        .into_iter()
         .collect();
-    let n = planes[0].len();
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&i, &j| planes[0][i].total_cmp(&planes[0][j]));
+    pixels.sort_by(|p, q| p.0.total_cmp(&q.0));
+    let n = pixels.len();
     std::array::from_fn(|bin| {
-        let share = &order[bin * n / COUPLING_BINS..(bin + 1) * n / COUPLING_BINS];
-        let sum: f64 = share
-            .iter()
-            .map(|&i| f64::from(planes[1][i]).hypot(f64::from(planes[2][i])))
-            .sum();
+        let share = &pixels[bin * n / COUPLING_BINS..(bin + 1) * n / COUPLING_BINS];
+        let sum: f64 = share.iter().map(|&(_, chroma)| chroma).sum();
         sum / share.len().max(1) as f64
     })
 }

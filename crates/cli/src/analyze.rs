@@ -37,6 +37,8 @@ struct AnalyzeReport<'a> {
     periodic_bytes: usize,
     repairs: &'a [AnalysisRepair],
     warnings: &'a [String],
+    /// What analysis chose that is not a problem (e.g. what the byte limit cut).
+    notes: &'a [String],
 }
 
 /// Rows, columns and step (measured texels per sample) of a stored range map.
@@ -275,7 +277,7 @@ pub struct Args {
     max_bytes: usize,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
     /// clusters, levels, band_marginal_bytes, colour_marginal_bytes, lit_marginal_bytes,
-    /// light_table_bytes, exemplar_bytes, exemplar_coarse, lattice, periodic_bytes, repairs, warnings.
+    /// light_table_bytes, exemplar_bytes, exemplar_coarse, lattice, periodic_bytes, repairs, warnings, notes.
     #[arg(long)]
     json: bool,
 }
@@ -342,6 +344,9 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     for w in &report.warnings {
         eprintln!("warning: {w}");
     }
+    for n in &report.notes {
+        eprintln!("note: {n}");
+    }
     let seconds = start.elapsed().as_secs_f64();
     format::write(&model, &args.out)?;
     let model_bytes = std::fs::metadata(&args.out)?.len();
@@ -371,6 +376,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             periodic_bytes: format::periodic_bytes(&model),
             repairs: &report.repairs,
             warnings: &report.warnings,
+            notes: &report.notes,
         })?;
     } else {
         if !report.repairs.is_empty() {
