@@ -277,7 +277,8 @@ pub struct Args {
     max_bytes: usize,
     /// Print one JSON object: analysis_seconds, model_bytes, raw_bytes, compression_ratio,
     /// clusters, levels, band_marginal_bytes, colour_marginal_bytes, lit_marginal_bytes,
-    /// light_table_bytes, exemplar_bytes, exemplar_coarse, lattice, periodic_bytes, repairs, warnings, notes.
+    /// light_table_bytes, exemplar_bytes, exemplar_coarse, lattice, periodic_bytes, repairs,
+    /// warnings, notes.
     #[arg(long)]
     json: bool,
 }

@@ -25,6 +25,10 @@ use super::{Global, emit, emit_json};
 /// every distance and texture size. Cost: the synthesis dominates and grows with the square
 /// of --tile (4x per doubling) times the clusters the view touches; the texture size changes
 /// only the (small) GPU cost.
+/// Not yet on the GPU: a model's light tables and each light's own exemplar detail (the
+/// CPU's `synthesize` applies both near the measured view), so a render blends the clusters'
+/// subspace images as they are: on the built-in stones, blotchier stones than `synthesize`
+/// draws under the same light.
 /// An LPCA model (.lpca, told by its magic bytes; also pca-rf) is decoded per fragment on
 /// the GPU instead, on the mesh as it is (it has no range map, so no --mapping): nothing is
 /// synthesized.
