@@ -699,7 +699,7 @@ fn analyze_in(btf: &Btf, options: &AnalysisOptions, progress: &dyn Progress) -> 
     let (model, said) = within_budget(model, options.max_bytes, &measured_luminance)?;
     match said {
         Budgeted::Whole => {}
-        Budgeted::Cut(note) => report.notes.push(note),
+        Budgeted::Dropped(note) => report.notes.push(note),
         Budgeted::Over(warning) => report.warnings.push(warning),
     }
     Ok(Analysed {
@@ -861,15 +861,15 @@ fn closest(distances: Vec<Option<f64>>, handicaps: &[f64]) -> usize {
         .unwrap_or(0)
 }
 
-/// `model`, or the same without its colour tables where the judge finds that closer to the
-/// measured images (its structure distance summed over the `judged` pairs, each cut to
-/// `max_bytes`, as [`judged_exemplar`]), when the light tables hold every light's chroma: the
-/// per-light a* and b* tables then give the finished image its measured colours, and the
-/// tables' joint transfer (a pixel-wise map of every subspace image's colours) only helps
-/// where it helps the structure. Built-in materials at 128^2, seeds 1-2, x the another-crop level with / without:
-/// leather 0.99 / 1.07 and 0.97 / 1.06, stones 1.24 / 1.18 and 1.40 / 1.33 (its transfer turned
-/// the laid chroma into blotches inside the stones), sponge 1.01 / 0.98 and 0.96 / 0.93; every
-/// colour channel within 1.0 Lab either way. A tie keeps the tables.
+/// `model`, or the same without its colour tables where the judge finds that closer to the measured
+/// images (its structure distance summed over the `judged` pairs, each cut to `max_bytes`, as
+/// [`judged_exemplar`]), when the light tables hold every light's chroma: the per-light a* and b*
+/// tables then give the finished image its measured colours, and the tables' joint transfer (a
+/// pixel-wise map of every subspace image's colours) only helps where it helps the structure.
+/// Built-in materials at 128^2, seeds 1-2, x the another-crop level with / without: leather 0.99 /
+/// 1.07 and 0.97 / 1.06, stones 1.24 / 1.18 and 1.40 / 1.33 (its transfer turned the laid chroma
+/// into blotches inside the stones), sponge 1.01 / 0.98 and 0.96 / 0.93; every colour channel
+/// within 1.0 Lab either way. A tie keeps the tables.
 fn judged_colour_tables(
     btf: &Btf,
     model: MaterialModel,
@@ -1011,15 +1011,15 @@ const JUDGED_SIDE: usize = 256;
 /// The default largest model file, bytes: issue 11's "at most 150 KB with every part".
 pub const MODEL_BUDGET: usize = 150_000;
 
-/// `model` within `max_bytes` as written: cut as [`trimmed`] cuts it (its light chroma tables
-/// where that alone brings it within, else its exemplar's last principal deviations, L* first,
-/// 8 KiB each at a 128 x 128 crop, then chroma), and where deviations went, the pair gains
-/// measured again on what synthesis now makes (once per cut, not per deviation: dropped one
-/// at a time with the gains measured after each, the built-in leather's judge run took 29.9 s
-/// with sixteen deviations to cut, against 14.9-15.7 s). The 3D CAR's larger band models put the built-in
-/// sponge and leather at 154 KB with three L* deviations; the leather's 3D CAR model at 149.4
-/// KB before the chroma tables (2.4 KB deflated) drops them and keeps its deviations. Also
-/// what was dropped, or that the model still does not fit.
+/// `model` within `max_bytes` as written: cut as [`trimmed`] cuts it (its light chroma tables where
+/// that alone brings it within, else its exemplar's last principal deviations, L* first, 8 KiB each
+/// at a 128 x 128 crop, then chroma), and where deviations went, the pair gains measured again on
+/// what synthesis now makes (once per cut, not per deviation: dropped one at a time with the gains
+/// measured after each, the built-in leather's judge run took 29.9 s with sixteen deviations to
+/// cut, against 14.9-15.7 s). The 3D CAR's larger band models put the built-in sponge and leather
+/// at 154 KB with three L* deviations; the leather's 3D CAR model at 149.4 KB before the chroma
+/// tables (2.4 KB deflated) drops them and keeps its deviations. Also what was dropped, or that the
+/// model still does not fit.
 fn within_budget(
     mut model: MaterialModel,
     max_bytes: Option<usize>,
@@ -1062,7 +1062,7 @@ fn within_budget(
     };
     Ok((
         model,
-        Budgeted::Cut(format!(
+        Budgeted::Dropped(format!(
             "dropped {what} to keep the model within {max} bytes (now {bytes}; --max-bytes sets the limit)"
         )),
     ))
@@ -1073,7 +1073,7 @@ enum Budgeted {
     /// It fitted whole.
     Whole,
     /// It fits now; what was dropped (a note: the limit at work, not a problem).
-    Cut(String),
+    Dropped(String),
     /// Nothing left to drop and still over the limit (a warning).
     Over(String),
 }
@@ -1099,58 +1099,52 @@ struct Cut {
 /// times rather than once a deviation.
 fn trimmed(model: MaterialModel, max_bytes: Option<usize>) -> Result<(MaterialModel, Cut)> {
     let bytes = format::to_bytes(&model).len();
-    let whole = Cut {
-        bytes,
-        fits: true,
-        ..Cut::default()
-    };
     let Some(max) = max_bytes.filter(|&max| bytes > max) else {
+        let whole = Cut {
+            bytes,
+            fits: true,
+            ..Cut::default()
+        };
         return Ok((model, whole));
     };
-    // The model with `k` deviations dropped, fitting with or without its tables, or `None`.
-    let fitting = |k: usize| -> Result<Option<(MaterialModel, Cut)>> {
-        let (fewer, _) = dropping(&model, k)?;
+    // The model with up to `k` deviations dropped, without its tables too where only that
+    // makes it fit.
+    let cut_at = |k: usize| -> Result<(MaterialModel, Cut)> {
+        let (fewer, deviations) = dropping(&model, k)?;
         let bytes = format::to_bytes(&fewer).len();
         let cut = Cut {
-            deviations: k,
-            fits: true,
-            bytes,
+            deviations,
             light_chroma: false,
+            fits: bytes <= max,
+            bytes,
         };
-        if bytes <= max {
-            return Ok(Some((fewer, cut)));
+        if !cut.fits
+            && let Some(lean) = without_light_chroma(&fewer)?
+        {
+            let bytes = format::to_bytes(&lean).len();
+            if bytes <= max {
+                let cut = Cut {
+                    light_chroma: true,
+                    fits: true,
+                    bytes,
+                    ..cut
+                };
+                return Ok((lean, cut));
+            }
         }
-        let Some(lean) = without_light_chroma(&fewer)? else {
-            return Ok(None);
-        };
-        let bytes = format::to_bytes(&lean).len();
-        Ok((bytes <= max).then_some((
-            lean,
-            Cut {
-                light_chroma: true,
-                bytes,
-                ..cut
-            },
-        )))
+        Ok((fewer, cut))
     };
-    let (bare, droppable) = dropping(&model, usize::MAX)?;
-    let Some(mut found) = fitting(droppable)? else {
-        let bytes = format::to_bytes(&bare).len();
-        let cut = Cut {
-            deviations: droppable,
-            fits: false,
-            bytes,
-            light_chroma: false,
-        };
-        return Ok((bare, cut));
-    };
-    // `found` fits at `hi` deviations dropped; nothing fits below `lo`.
-    let (mut lo, mut hi) = (0, droppable);
-    while lo < hi {
+    // Every deviation dropped; where that fits, the fewest that do, by bisection: `found`
+    // fits at `hi` deviations, nothing below `lo`.
+    let mut found = cut_at(usize::MAX)?;
+    let (mut lo, mut hi) = (0, found.1.deviations);
+    while found.1.fits && lo < hi {
         let mid = lo + (hi - lo) / 2;
-        match fitting(mid)? {
-            Some(at) => (found, hi) = (at, mid),
-            None => lo = mid + 1,
+        let at = cut_at(mid)?;
+        if at.1.fits {
+            (found, hi) = (at, mid);
+        } else {
+            lo = mid + 1;
         }
     }
     Ok(found)

@@ -616,36 +616,28 @@ impl MaterialModel {
         Ok(self.relief_cache(o, NoiseBank::kept()))
     }
 
-    /// An empty cache holding the range map's heights, and the exemplar's details where one
-    /// quilt lays both ([`MaterialModel::relief`]).
-    fn relief_cache(&self, o: &SynthesisOptions, noise: NoiseBank) -> SynthesisCache {
-        let (heights, details) = self.relief(o);
-        let cache = self.empty_cache(o, heights, noise);
-        if let Some(details) = details {
-            cache
-                .structure
-                .set(details)
-                .expect("a new cache has no structure yet");
-        }
-        cache
-    }
-
-    /// The output's heights (`None` without a range map) and, where the quilt or lattice that
-    /// lays the relief also decides the exemplar's laid details, those (`None`: the cache lays
-    /// them when first needed): one quilt for both where the exemplar is registered with the
-    /// map ([`MaterialModel::laid_together`]), the lattice for a near-regular material
+    /// An empty cache holding the range map's heights (`None` without a range map), and the
+    /// exemplar's details where the quilt or lattice that lays the relief decides them: one
+    /// quilt for both where the exemplar is registered with the map
+    /// ([`MaterialModel::laid_together`]), the lattice for a near-regular material
     /// ([`MaterialModel::lattice_relief`]), else the map quilted alone
-    /// ([`MaterialModel::quilted_heights`]).
-    fn relief(&self, o: &SynthesisOptions) -> (Option<Array2<f64>>, Option<Option<LaidExemplar>>) {
-        if let Some((relief, details)) = self.laid_together(o) {
+    /// ([`MaterialModel::quilted_heights`]) and the details laid when first needed.
+    fn relief_cache(&self, o: &SynthesisOptions, noise: NoiseBank) -> SynthesisCache {
+        let (heights, details) = if let Some((relief, details)) = self.laid_together(o) {
             // The heights are integrated here from the quilted relief's differences.
             let heights = cropped(details.scale.apply(relief.integrate()), o.rows, o.cols);
-            return (Some(heights), Some(Some(details)));
-        }
-        if let Some((heights, details)) = self.lattice_relief(o) {
-            return (Some(heights), Some(details));
-        }
-        (self.quilted_heights(o), None)
+            (heights, Some(details))
+        } else if let Some((heights, details)) = self.lattice_relief(o) {
+            (heights, details)
+        } else {
+            return self.empty_cache(o, self.quilted_heights(o), noise);
+        };
+        let cache = self.empty_cache(o, Some(heights), noise);
+        cache
+            .structure
+            .set(details)
+            .expect("a new cache has no structure yet");
+        cache
     }
 
     fn empty_cache(
@@ -950,11 +942,11 @@ impl MaterialModel {
     /// in step with the colour's, with the threads' own relief around it
     /// ([`MaterialModel::lattice_relief`]).
     pub fn range_heights(&self, o: &SynthesisOptions) -> Option<Array2<f64>> {
-        self.relief(o).0
+        self.relief_cache(o, NoiseBank::transient()).heights
     }
 
-    /// The range map quilted alone ([`quilt`]) over the output: [`MaterialModel::relief`]'s
-    /// heights where no exemplar or lattice lays them.
+    /// The range map quilted alone ([`quilt`]) over the output: the heights where no exemplar
+    /// or lattice lays them ([`MaterialModel::relief_cache`]).
     fn quilted_heights(&self, o: &SynthesisOptions) -> Option<Array2<f64>> {
         let map = self.range_map()?;
         let (rows, cols, seed) = (o.rows, o.cols, o.seed);
@@ -969,7 +961,7 @@ impl MaterialModel {
         Some(cropped(resample_periodic(&torus, tr, tc), rows, cols))
     }
 
-    /// A near-regular material's relief ([`MaterialModel::relief`]) and its laid
+    /// A near-regular material's relief ([`MaterialModel::range_heights`]) and its laid
     /// exemplar: the range map's mean period laid on the output lattice, plus, where the
     /// exemplar was cut from the map's own texels (a map of the whole measured tile at a texel
     /// a sample; the exemplar is cut at the lattice's origin), the map's deviation from its
@@ -1040,11 +1032,11 @@ impl MaterialModel {
         Some(laid_exemplar(&guide, e, o, (seed, phase.as_ref(), true), placement_only).1)
     }
 
-    /// The range map's heights ([`MaterialModel::relief`]) and the exemplar's zero-mean basis
-    /// details from one quilt ([`quilt_laid`]), when the exemplar is registered with a map sampled
-    /// at every pixel and no lattice lays the relief: a pit in the relief and its dark colour then
-    /// stay together, and a cell a cut crossed takes one mean colour ([`LaidCells`]). `None`
-    /// otherwise.
+    /// The range map's heights ([`MaterialModel::range_heights`]) and the exemplar's zero-mean
+    /// basis details from one quilt ([`quilt_laid`]), when the exemplar is registered with a map
+    /// sampled at every pixel and no lattice lays the relief: a pit in the relief and its dark
+    /// colour then stay together, and a cell a cut crossed takes one mean colour ([`LaidCells`]).
+    /// `None` otherwise.
     fn laid_together(&self, o: &SynthesisOptions) -> Option<(QuiltedRelief, LaidExemplar)> {
         let (map, e) = (self.range_map()?, self.exemplar()?);
         if map.step != e.step
