@@ -26,8 +26,10 @@ const NO_LAYER: u32 = 0xffffffffu;
 // Range map: xyz = unit normal in the tangent frame, w = height in texels (mean 0).
 @group(0) @binding(2) var relief: texture_2d<f32>;
 @group(0) @binding(3) var tex_sampler: sampler;
-// (view * lights + light) -> texture layer of its cluster, NO_LAYER when not synthesized.
-@group(0) @binding(8) var<storage, read> pair_layer: array<u32>;
+// (view * lights + light) -> x: the texture layer of its cluster, NO_LAYER when not
+// synthesized; y: the layer of its finish in `finishes`, NO_LAYER when it has none or it was
+// not planned.
+@group(0) @binding(8) var<storage, read> pair_layer: array<vec2<u32>>;
 // Mean of max(0, n . l) over the texture, on a SHADING_GRID^2 node grid of light directions.
 @group(0) @binding(9) var<storage, read> mean_shade: array<f32>;
 // Per measured light, the bump strength k of the shading factor 1 + k (s - 1).
@@ -37,6 +39,10 @@ const NO_LAYER: u32 = 0xffffffffu;
 // The range map's heights (tile texels above their mean) in single precision, read unfiltered
 // for the view parallax and the cast shadows (1 x 1 without a range map).
 @group(0) @binding(12) var ray_heights: texture_2d<f32>;
+// What the measured pairs with parts of their own (light tables, a light's own exemplar
+// detail or period) add to their relit subspace image (MaterialModel::pair_finish), one layer
+// per planned pair.
+@group(0) @binding(13) var finishes: texture_2d_array<f32>;
 
 // Mean of max(0, n . l) over the texture for the projected tangent-frame light direction q
 // (bilinear in the table).
@@ -140,12 +146,14 @@ fn seen_uv(uv: vec2<f32>, v: vec3<f32>) -> vec2<f32> {
 }
 
 // The MRF BTF at a fragment (image_from_cache on the CPU): the 3 x 3 nearest measured (view,
-// light) pairs blend their clusters' subspace images (each at its pair's gain), then the range map's normal relights
-// the blend for the light by the factor 1 + k (s - 1) (floored at SHADING_FLOOR, which
-// mrf.rs defines from the CPU's), s = max(0, n . l) (times cast_light) / mean shading, so
-// that the subspace images' own average shading is not applied twice, k the measured
-// strength (bump_relight, bump_strength). Clusters that were not synthesized
-// (outside the planned set) are skipped and the weights renormalised.
+// light) pairs blend their clusters' subspace images (each at its pair's gain), then the
+// range map's normal relights the blend for the light by the factor 1 + k (s - 1) (floored
+// at SHADING_FLOOR, which mrf.rs defines from the CPU's), s = max(0, n . l) (times
+// cast_light) / mean shading, so that the subspace images' own average shading is not
+// applied twice, k the measured strength (bump_relight, bump_strength); last, the pairs'
+// finishes are added with the same weights (exact at a measured pair, blended between).
+// Clusters that were not synthesized (outside the planned set) are skipped and the weights
+// renormalised.
 // `ddx`, `ddy`: the screen derivatives of in.uv (taken by the caller, in uniform control flow).
 fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
     let dirs = tangent_directions(in);
@@ -161,6 +169,7 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
     let iv = interpolate_dir(project_dir(v, globals.limits.x), true);
     let il = interpolate_dir(ql, false);
     var sum = vec3<f32>(0.0);
+    var finish = vec3<f32>(0.0);
     var total = 0.0;
     for (var a = 0; a < 3; a++) {
         for (var b = 0; b < 3; b++) {
@@ -168,10 +177,13 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
             if (w > 0.0) {
                 let pair = iv.index[a] * globals.counts.y + il.index[b];
                 let layer = pair_layer[pair];
-                if (layer != NO_LAYER) {
-                    let texel = textureSampleGrad(subspaces, tex_sampler, uv, layer, ddx, ddy).rgb;
+                if (layer.x != NO_LAYER) {
+                    let texel = textureSampleGrad(subspaces, tex_sampler, uv, layer.x, ddx, ddy).rgb;
                     sum += w * pair_gain[pair] * texel;
                     total += w;
+                    if (layer.y != NO_LAYER) {
+                        finish += w * textureSampleGrad(finishes, tex_sampler, uv, layer.y, ddx, ddy).rgb;
+                    }
                 }
             }
         }
@@ -189,6 +201,7 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
             colour *= max(1.0 + k * (s - 1.0), SHADING_FLOOR);
         }
     }
+    colour += finish / max(total, 1e-12);
     return vec4<f32>(colour * falloff, 1.0);
 }
 

@@ -87,8 +87,13 @@ pub struct SynthesisCache {
     /// The exemplar's basis crops laid with one quilt's patches, made on first use; `None`
     /// without an exemplar.
     structure: OnceLock<Option<LaidExemplar>>,
+    /// The measured pairs' finishes ([`MaterialModel::pair_finish`]) made so far.
+    finishes: Mutex<HashMap<(usize, usize), Finish>>,
     noise: NoiseBank,
 }
+
+/// A measured pair's finish, shape (3, rows, cols), shared by the cache and its users.
+pub type Finish = Arc<Array3<f32>>;
 
 /// An exemplar's basis fields copied onto the output with one quilt's patches.
 #[derive(Debug)]
@@ -654,6 +659,7 @@ impl MaterialModel {
             heights,
             normals: OnceLock::new(),
             structure: OnceLock::new(),
+            finishes: Mutex::new(HashMap::new()),
             noise,
         }
     }
@@ -697,18 +703,38 @@ impl MaterialModel {
         view: &Direction,
         light: &Direction,
     ) -> Result<Array3<f32>> {
+        let weights = self.weights_by_cluster(view, light, true)?;
+        let blend = self.blend(cache, &weights)?;
+        let own = self.with_own_parts(blend, cache, (view, light), &weights)?;
+        self.relit(own, cache, view, light)
+    }
+
+    /// The subspace images blended by `weights` (per cluster, the pairs' weights times their
+    /// gains: each measured pair brings its subspace image at its own brightness).
+    fn blend(&self, cache: &SynthesisCache, weights: &BTreeMap<usize, f64>) -> Result<Array3<f32>> {
         let o = &cache.options;
         let mut out: Option<Array3<f32>> = None;
-        // Each measured pair brings its subspace image at its own brightness (its gain).
-        let weights = self.weights_by_cluster(view, light, true)?;
-        for (&k, &w) in &weights {
+        for (&k, &w) in weights {
             let part = self.subspace_from_cache(cache, k)?;
             match &mut out {
                 None => out = Some(part.mapv(|v| w as f32 * v)),
                 Some(out) => out.scaled_add(w as f32, part),
             }
         }
-        let mut out = out.unwrap_or_else(|| Array3::zeros((3, o.rows, o.cols)));
+        Ok(out.unwrap_or_else(|| Array3::zeros((3, o.rows, o.cols))))
+    }
+
+    /// `out`, the blend of the subspace images by `weights`, given what the measured lights
+    /// around (`view`, `light`) have of their own: their period on a lattice, their exemplar
+    /// detail.
+    fn with_own_parts(
+        &self,
+        mut out: Array3<f32>,
+        cache: &SynthesisCache,
+        (view, light): (&Direction, &Direction),
+        weights: &BTreeMap<usize, f64>,
+    ) -> Result<Array3<f32>> {
+        let o = &cache.options;
         if let Some(factor) = self.light_period(o, view, light)? {
             out.zip_mut_with(&factor, |v, &f| *v = (f64::from(*v) * f) as f32);
         }
@@ -751,14 +777,90 @@ impl MaterialModel {
                 }
             }
         }
+        Ok(out)
+    }
+
+    /// `out` relit for `light` by the cache's relief and seen from `view` with its parallax;
+    /// as it is without a range map.
+    fn relit(
+        &self,
+        mut out: Array3<f32>,
+        cache: &SynthesisCache,
+        view: &Direction,
+        light: &Direction,
+    ) -> Result<Array3<f32>> {
         if let Some(heights) = &cache.heights {
             let shading = self.bump_shading(light)?;
-            bump_relight(&mut out, heights, o.edges(), light, shading);
-            if let Some(warp) = parallax::view_warp(heights, o.edges(), view.vector()) {
+            bump_relight(&mut out, heights, cache.options.edges(), light, shading);
+            if let Some(warp) = parallax::view_warp(heights, cache.options.edges(), view.vector()) {
                 out = warp.apply(&out);
             }
         }
         Ok(out)
+    }
+
+    /// Whether the measured pair (`view`, `light`) has parts of its own beyond its cluster's
+    /// subspace image: its view's light tables, its light's own exemplar detail or period
+    /// (see [`MaterialModel::pair_finish`]).
+    pub fn has_own_parts(&self, view: usize, light: usize) -> bool {
+        let tables = self
+            .light_lightness()
+            .is_some_and(|t| t.view == view && light < t.tables.len());
+        let weighed =
+            |w: Option<&LightWeights>| w.is_some_and(|w| w.view == view && light < w.weights.len());
+        tables
+            || weighed(self.exemplar().and_then(|e| e.light_weights.as_ref()))
+            || weighed(self.periodic().and_then(|p| p.light_weights.as_ref()))
+    }
+
+    /// What the measured pair (`view`, `light`)'s own parts (its light's period and exemplar
+    /// detail, its light tables) add to its image, at its measured directions, shape (3, rows,
+    /// cols) of the cache: [`MaterialModel::image_from_cache`] less its subspace image at its
+    /// gain, relit and seen as there. A renderer that blends subspace images and relights them
+    /// per fragment adds the finishes of the same pairs with the same weights: exact at a
+    /// measured pair, a blend of the nearest pairs' finishes between them. Made once per
+    /// cache; `None` where the pair has no own parts ([`MaterialModel::has_own_parts`]).
+    ///
+    /// # Errors
+    /// `view` or `light` out of range.
+    pub fn pair_finish(
+        &self,
+        cache: &SynthesisCache,
+        view: usize,
+        light: usize,
+    ) -> Result<Option<Finish>> {
+        let (Some(&v), Some(&l)) = (
+            self.views().as_slice().get(view),
+            self.lights().as_slice().get(light),
+        ) else {
+            return Err(ModelError::parameter(
+                "pair",
+                format!(
+                    "({view}, {light}) is not a measured pair of {} views and {} lights",
+                    self.views().len(),
+                    self.lights().len()
+                ),
+            ));
+        };
+        if !self.has_own_parts(view, light) {
+            return Ok(None);
+        }
+        let lock = || {
+            cache
+                .finishes
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+        };
+        if let Some(done) = lock().get(&(view, light)) {
+            return Ok(Some(Arc::clone(done)));
+        }
+        let weights = self.weights_by_cluster(&v, &l, true)?;
+        let plain = self.relit(self.blend(cache, &weights)?, cache, &v, &l)?;
+        let finish = Arc::new(self.image_from_cache(cache, &v, &l)? - plain);
+        let mut done = lock();
+        Ok(Some(Arc::clone(
+            done.entry((view, light)).or_insert(finish),
+        )))
     }
 
     /// The L* detail the measured lights around `light` have of their own beyond their
@@ -1459,6 +1561,50 @@ pub fn relief_factor(
 mod tests {
     use super::*;
     use crate::model::LitMarginals;
+
+    #[test]
+    fn a_pairs_finish_is_what_its_own_parts_add_to_its_relit_subspace_image() {
+        // The ready stones: light tables and each light's own detail in view 0.
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models/stones.btfm");
+        let model = crate::model::format::read(&path).unwrap();
+        let o = SynthesisOptions {
+            rows: 64,
+            cols: 64,
+            seed: 3,
+            tileable: true,
+        };
+        let cache = model.synthesis_cache(&o).unwrap();
+        let (view, light) = (0, 30);
+        assert!(model.has_own_parts(view, light));
+        let finish = model.pair_finish(&cache, view, light).unwrap().unwrap();
+        // Its subspace image at its gain, relit by the public pieces, plus the finish is the
+        // finished image.
+        let (v, l) = (
+            model.views().as_slice()[view],
+            model.lights().as_slice()[light],
+        );
+        let k = model.cluster_of(view, light).unwrap();
+        let gain = model.pair_gain(view, light) as f32;
+        let mut plain = model
+            .subspace_from_cache(&cache, k)
+            .unwrap()
+            .mapv(|x| gain * x);
+        let shading = model.bump_shading(&l).unwrap();
+        bump_relight(&mut plain, cache.heights().unwrap(), o.edges(), &l, shading);
+        let finished = model.image_from_cache(&cache, &v, &l).unwrap();
+        let apart = (&plain + &*finish - &finished)
+            .iter()
+            .fold(0.0f32, |m, x| m.max(x.abs()));
+        assert!(apart < 1e-5, "{apart}");
+        // The parts change the image, and the finish is made once per cache.
+        assert!(finish.iter().any(|x| x.abs() > 0.01));
+        let again = model.pair_finish(&cache, view, light).unwrap().unwrap();
+        assert!(Arc::ptr_eq(&finish, &again));
+        // Another view has no parts of its own; a pair beyond the set is an error.
+        assert!(!model.has_own_parts(1, light));
+        assert!(model.pair_finish(&cache, 1, light).unwrap().is_none());
+        assert!(model.pair_finish(&cache, 0, 81).is_err());
+    }
 
     #[test]
     fn a_ratio_at_its_mean_lightness_moves_by_the_detail() {

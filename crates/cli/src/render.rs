@@ -25,10 +25,12 @@ use super::{Global, emit, emit_json};
 /// every distance and texture size. Cost: the synthesis dominates and grows with the square
 /// of --tile (4x per doubling) times the clusters the view touches; the texture size changes
 /// only the (small) GPU cost.
-/// Not yet on the GPU: a model's light tables and each light's own exemplar detail (the
-/// CPU's `synthesize` applies both near the measured view), so a render blends the clusters'
-/// subspace images as they are: on the built-in stones, blotchier stones than `synthesize`
-/// draws under the same light.
+/// Where a model keeps light tables or each light's own exemplar detail (near the view they
+/// were measured in), the CPU also finishes each measured pair the surface draws on: one
+/// --tile-sized image of what those parts add (as `synthesize` applies them), which the GPU
+/// adds blended like the pairs. A render then equals `synthesize` at a measured light and
+/// blends the nearest lights' finishes between them; each finish costs about a subspace
+/// image's synthesis.
 /// An LPCA model (.lpca, told by its magic bytes; also pca-rf) is decoded per fragment on
 /// the GPU instead, on the mesh as it is (it has no range map, so no --mapping): nothing is
 /// synthesized.
@@ -197,6 +199,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
                 texture_size: s.plan.texture_size,
                 tile: s.tile,
                 clusters: &s.plan.clusters,
+                finished_pairs: &s.plan.finishes,
                 subspaces_synthesized: s.subspaces_synthesized,
                 subspaces_total: s.subspaces_total,
                 texels_synthesized: s.texels_synthesized,
@@ -221,7 +224,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     }
     match &out.stats {
         RenderStats::Mrf(s) => emit(format!(
-            "wrote {} ({}x{}, {} on {}; {} of {} subspace images synthesized at {}^2 in {:.3} s, sampled at {}^2, rendered in {:.3} s)",
+            "wrote {} ({}x{}, {} on {}; {} of {} subspace images synthesized at {}^2{} in {:.3} s, sampled at {}^2, rendered in {:.3} s)",
             args.out.display(),
             width,
             height,
@@ -230,6 +233,10 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             s.subspaces_synthesized,
             s.subspaces_total,
             s.tile,
+            match s.plan.finishes.len() {
+                0 => String::new(),
+                n => format!(" and {n} measured pair(s) finished with their own parts"),
+            },
             s.synthesis_seconds,
             s.plan.texture_size,
             out.render_seconds
@@ -271,6 +278,8 @@ enum MaterialReport<'a> {
         texture_size: usize,
         tile: usize,
         clusters: &'a [usize],
+        /// The measured (view, light) pairs finished with their own parts.
+        finished_pairs: &'a [(usize, usize)],
         subspaces_synthesized: usize,
         subspaces_total: usize,
         texels_synthesized: u64,

@@ -40,7 +40,7 @@ fn frames(c: &mut Criterion) {
             },
         )
         .unwrap();
-    let tables = MaterialTables::new(&model, &cache, None).unwrap();
+    let tables = MaterialTables::new(&model, &cache, None, &[]).unwrap();
     let material = GpuMaterial::new(&renderer.ctx, &renderer.mrf, &cache, &tables).unwrap();
     let scene = Scene {
         camera: Camera::orbit(Direction::new(30.0, 270.0), 3.2),

@@ -71,7 +71,7 @@ pub struct MrfStats {
     pub subspaces_synthesized: usize,
     /// Texels synthesized (subspace images x side^2).
     pub texels_synthesized: u64,
-    /// Seconds spent synthesizing subspace images and range map.
+    /// Seconds spent synthesizing subspace images and range map, and finishing pairs.
     pub synthesis_seconds: f64,
 }
 
@@ -368,8 +368,8 @@ impl Renderer {
     ) -> Result<RenderOutput<MrfStats>> {
         let (rows, cols) = (cache.options().rows, cache.options().cols);
         let model = job.model;
-        let tables =
-            MaterialTables::new(model, cache, Some(job.luts))?.at_resolution(plan.texture_size)?;
+        let tables = MaterialTables::new(model, cache, Some(job.luts), &plan.finishes)?
+            .at_resolution(plan.texture_size)?;
         let synthesis_seconds = job.start.elapsed().as_secs_f64();
         let start = Instant::now();
         let material = GpuMaterial::new(&self.ctx, &self.mrf, cache, &tables)?;

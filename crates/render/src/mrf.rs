@@ -4,6 +4,7 @@
 
 use half::f16;
 use ndarray::{Array2, Array3};
+use rayon::prelude::*;
 use wgpu::util::DeviceExt;
 
 use super::lut::{DirectionLut, MeanShading};
@@ -15,7 +16,7 @@ use super::scene::Scene;
 use super::{GpuContext, Mapping, RenderError, Result};
 use btfmrf::geometry::relight::Shadows;
 use btfmrf::model::MaterialModel;
-use btfmrf::synthesis::SynthesisCache;
+use btfmrf::synthesis::{Finish, SynthesisCache};
 
 const MRF_WGSL: &str = include_str!("../../../shaders/mrf.wgsl");
 
@@ -51,6 +52,11 @@ pub struct MaterialTables {
     pub pair_layer: Vec<u32>,
     /// Per (view * lights + light), the pair's gain ([`MaterialModel::pair_gain`]).
     pub pair_gain: Vec<f32>,
+    /// The finishes of the measured pairs with parts of their own that the scene draws on
+    /// ([`MaterialModel::pair_finish`]: light tables, a light's own detail), in layer order.
+    pub finishes: Vec<Finish>,
+    /// Per (view * lights + light), the layer of its pair's finish or `u32::MAX`.
+    pub finish_layer: Vec<u32>,
     /// Measured views and lights.
     pub counts: (usize, usize),
     /// Direction tables of the views and of the lights.
@@ -79,15 +85,18 @@ pub struct ReliefHeights {
 }
 
 impl MaterialTables {
-    /// The tables for `model` with the clusters synthesized in `cache`; `luts` are the
-    /// model's view and light tables, when already built (else they are built here).
+    /// The tables for `model` with the clusters synthesized in `cache` and the finishes of
+    /// the measured `pairs` (made here where `cache` lacks them; pairs without parts of
+    /// their own are skipped); `luts` are the model's view and light tables, when already
+    /// built (else they are built here).
     ///
     /// # Errors
-    /// Never for a valid model (direction interpolation of finite directions).
+    /// A pair out of range, or a synthesis error while making a finish.
     pub fn new(
         model: &MaterialModel,
         cache: &SynthesisCache,
         luts: Option<(DirectionLut, DirectionLut)>,
+        pairs: &[(usize, usize)],
     ) -> Result<Self> {
         let (view_lut, light_lut) = match luts {
             Some(l) => l,
@@ -125,7 +134,20 @@ impl MaterialTables {
         let pair_gain = (0..nv * nl)
             .map(|i| model.pair_gain(i / nl, i % nl) as f32)
             .collect();
+        let made: Vec<((usize, usize), Finish)> = pairs
+            .par_iter()
+            .filter_map(|&(v, l)| {
+                let finish = model.pair_finish(cache, v, l).transpose()?;
+                Some(finish.map(|f| ((v, l), f)))
+            })
+            .collect::<std::result::Result<_, _>>()?;
+        let mut finish_layer = vec![u32::MAX; nv * nl];
+        for (layer, ((v, l), _)) in made.iter().enumerate() {
+            finish_layer[v * nl + l] = layer as u32;
+        }
         Ok(Self {
+            finishes: made.into_iter().map(|(_, f)| f).collect(),
+            finish_layer,
             size: cache.options().rows,
             tile: cache.options().rows,
             clusters,
@@ -339,6 +361,30 @@ impl GpuMaterial {
             None => push_mip_chain(&mut relief_data, tile, skip, |_, _| [0.0, 0.0, 1.0, 0.0]),
         }
         let relief = ctx.checked("relief texture", || texture("relief", 1, &relief_data))?;
+        // The pairs' finishes; one texel of zeros stands in when there are none.
+        let finishes = if tables.finishes.is_empty() {
+            let zeros = [0u8; 8];
+            ctx.checked("pair finishes", || {
+                upload(
+                    "pair finishes",
+                    1,
+                    1,
+                    wgpu::TextureFormat::Rgba16Float,
+                    1,
+                    &zeros,
+                )
+            })?
+        } else {
+            let mut data = Vec::new();
+            for f in &tables.finishes {
+                push_mip_chain(&mut data, tile, skip, |y, x| {
+                    [f[[0, y, x]], f[[1, y, x]], f[[2, y, x]], 0.0]
+                });
+            }
+            ctx.checked("pair finishes", || {
+                texture("pair finishes", tables.finishes.len(), &data)
+            })?
+        };
         let (ray_side, ray_data) = match heights {
             Some(h) => (tile, ray_heights(h)),
             None => (1, vec![0.0]),
@@ -355,8 +401,12 @@ impl GpuMaterial {
             )
         })?;
         let common = CommonBuffers::new(ctx, (&tables.view_lut, &tables.light_lut))?;
-        let pair_layer =
-            storage_buffer(ctx, "pair layers", bytemuck::cast_slice(&tables.pair_layer))?;
+        // Per pair, its cluster's layer and its finish's (the shader's `PairLayers`).
+        let layers: Vec<u32> = (tables.pair_layer.iter())
+            .zip(&tables.finish_layer)
+            .flat_map(|(&c, &f)| [c, f])
+            .collect();
+        let pair_layer = storage_buffer(ctx, "pair layers", bytemuck::cast_slice(&layers))?;
         let pair_gain = storage_buffer(ctx, "pair gains", bytemuck::cast_slice(&tables.pair_gain))?;
         let ones = vec![1.0f32; super::lut::SHADING_GRID * super::lut::SHADING_GRID];
         let shading = tables.mean_shading.as_ref().map_or(&ones, |m| &m.values);
@@ -381,6 +431,10 @@ impl GpuMaterial {
         });
         let relief_view = relief.create_view(&wgpu::TextureViewDescriptor::default());
         let ray_view = rays.create_view(&wgpu::TextureViewDescriptor::default());
+        let finish_view = finishes.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
         let mut entries = common.entries();
         entries.extend([
             wgpu::BindGroupEntry {
@@ -414,6 +468,10 @@ impl GpuMaterial {
             wgpu::BindGroupEntry {
                 binding: 11,
                 resource: pair_gain.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 13,
+                resource: wgpu::BindingResource::TextureView(&finish_view),
             },
         ]);
         let bind_group = ctx.checked("material bind group", || {
@@ -501,6 +559,7 @@ impl MrfPass {
                 },
                 count: None,
             },
+            texture(13, wgpu::TextureViewDimension::D2Array),
         ]);
         let layout = bind_group_layout(ctx, "mrf material", &entries);
         let pipeline = |mapping: Mapping| {

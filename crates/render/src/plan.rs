@@ -19,6 +19,10 @@ use btfmrf::model::MaterialModel;
 pub struct ScenePlan {
     /// The clusters (subspace images) the visible surface draws on, ascending.
     pub clusters: Vec<usize>,
+    /// The measured (view, light) pairs the visible surface draws on that have parts of
+    /// their own ([`MaterialModel::has_own_parts`]), ascending: their finishes
+    /// ([`MaterialModel::pair_finish`]) are made and uploaded.
+    pub finishes: Vec<(usize, usize)>,
     /// Texture side on the GPU, texels (how finely one repetition is sampled, not what it
     /// holds): the power of two nearest (on a log scale) to the largest screen
     /// footprint of one texture repetition, in pixels, within `[min, max]` of [`plan_scene`].
@@ -57,6 +61,7 @@ pub fn plan_scene(
         c[3] > 0.0 && c[0].abs() <= 1.05 * c[3] && c[1].abs() <= 1.05 * c[3] && c[2] >= 0.0
     };
     let mut clusters = BTreeSet::new();
+    let mut finishes = BTreeSet::new();
     let mut sample = |p: [f32; 3], n: [f32; 3], tangent: [f32; 4]| {
         let t = [tangent[0], tangent[1], tangent[2]];
         let b = {
@@ -89,6 +94,9 @@ pub fn plan_scene(
                 if vw[a] * lw[c] > 0.0 {
                     let k = model.cluster_of(vi[a], li[c]);
                     clusters.insert(k.expect("the lookup tables index the model's directions"));
+                    if model.has_own_parts(vi[a], li[c]) {
+                        finishes.insert((vi[a], li[c]));
+                    }
                 }
             }
         }
@@ -154,6 +162,7 @@ pub fn plan_scene(
     let wanted = 1usize << (texels_per_uv.max(1.0).log2().round() as u32).min(30);
     ScenePlan {
         clusters: clusters.into_iter().collect(),
+        finishes: finishes.into_iter().collect(),
         texture_size: wanted.clamp(min_size, max_size.max(min_size)),
     }
 }
@@ -230,6 +239,8 @@ mod tests {
             .into_keys()
             .collect();
         assert_eq!(plan.clusters, cpu);
+        // The skeleton has no parts of any light's own.
+        assert!(plan.finishes.is_empty());
         // One repetition covers 256 pixels.
         assert_eq!(plan.texture_size, 256);
         // A sphere seen from an angle touches more light directions than a plane.
