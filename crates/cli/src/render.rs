@@ -8,6 +8,8 @@ use btfmrf::lpca;
 use btfmrf::memory;
 use btfmrf::model::format;
 use btfmrf::source::ModelFile;
+use btfmrf_render::lut::DirectionLut;
+use btfmrf_render::plan::plan_scene;
 use btfmrf_render::{
     Camera, Light, Mapping, Material, MeshKind, ModelRenderOptions, RenderStats, Renderer, Scene,
 };
@@ -159,14 +161,28 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         Renderer::new()?.render_material(Material::Lpca(&model), &mesh, &scene)?
     } else {
         let model = format::read(&args.model)?;
-        // The subspace images are synthesized at the tile's side, whatever the texture size.
+        // The subspace images are synthesized at the tile's side, whatever the texture size,
+        // and so are the finishes of the measured pairs with parts of their own that the
+        // surface draws on (each about a subspace image's memory).
         let texture = args.tile;
         let threads = memory::worker_threads();
+        let finishes = match mapping {
+            Mapping::Plain => 0,
+            Mapping::Bump | Mapping::Displacement => {
+                let luts = (
+                    DirectionLut::new(model.views())?,
+                    DirectionLut::new(model.lights())?,
+                );
+                plan_scene(&model, &mesh, &scene, (&luts.0, &luts.1), (1, 1))
+                    .finishes
+                    .len()
+            }
+        };
         let need = |side| {
             memory::render_bytes(
                 width as usize * height as usize,
                 side,
-                model.subspaces().len(),
+                model.subspaces().len() + finishes,
                 threads,
             )
         };

@@ -193,6 +193,21 @@ fn assert_gpu_near_cpu(
             .into_keys()
             .collect();
         assert_eq!(gpu.stats.plan.clusters, cpu_clusters, "{name} {light:?}");
+        // ... and the pairs with parts of their own were finished: the CPU's, and at most a
+        // neighbour that the lookup tables give a vanishing weight (as for the clusters).
+        let finished = &gpu.stats.plan.finishes;
+        let cpu_pairs = model.neighbouring_pairs(&Direction::new(0.0, 0.0), &light);
+        for (v, l, _) in cpu_pairs.unwrap() {
+            let own = model.has_own_parts(v, l);
+            assert_eq!(
+                finished.contains(&(v, l)),
+                own,
+                "{name} {light:?}: ({v}, {l})"
+            );
+        }
+        for &(v, l) in finished {
+            assert!(model.has_own_parts(v, l), "{name} {light:?}: ({v}, {l})");
+        }
         assert_eq!(gpu.stats.plan.clusters.len(), cache.synthesized());
         let err = (&gpu.image - &cpu).mapv(f32::abs);
         let scale = cpu.iter().fold(0.0f32, |m, &x| m.max(x.abs())).max(1e-3);
@@ -276,6 +291,16 @@ fn the_gpu_adds_each_measured_pairs_own_parts_as_the_cpu_does() {
         mean: 0.025,
     };
     assert_gpu_near_cpu(&renderer, &model, "own-parts-between", &between, tolerance);
+    // Plain texturing shows one subspace image as it is: it finishes no pair.
+    let (mesh, options) = bump_plane(128);
+    let options = ModelRenderOptions {
+        mapping: Mapping::Plain,
+        ..options
+    };
+    let plain = renderer
+        .render_model(&model, &mesh, &flat_scene(128, measured[0]), &options)
+        .unwrap();
+    assert!(plain.stats.plan.finishes.is_empty());
 }
 
 #[test]

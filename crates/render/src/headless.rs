@@ -162,14 +162,20 @@ impl<'a> MrfJob<'a> {
         })
     }
 
+    /// The scene's plan; plain texturing shows one subspace image as it is, so it finishes
+    /// no pair.
     fn plan(&self, sizes: (usize, usize)) -> ScenePlan {
-        plan_scene(
+        let mut plan = plan_scene(
             self.model,
             self.mesh,
             self.scene,
             (&self.luts.0, &self.luts.1),
             sizes,
-        )
+        );
+        if self.mapping == Mapping::Plain {
+            plan.finishes.clear();
+        }
+        plan
     }
 }
 
