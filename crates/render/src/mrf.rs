@@ -401,7 +401,7 @@ impl GpuMaterial {
             )
         })?;
         let common = CommonBuffers::new(ctx, (&tables.view_lut, &tables.light_lut))?;
-        // Per pair, its cluster's layer and its finish's (the shader's `PairLayers`).
+        // Per pair, its cluster's layer and its finish's, as `pair_layer`'s x and y.
         let layers: Vec<u32> = (tables.pair_layer.iter())
             .zip(&tables.finish_layer)
             .flat_map(|(&c, &f)| [c, f])
