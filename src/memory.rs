@@ -100,7 +100,7 @@ pub fn lpca_bytes(width: usize, height: usize, images: usize, threads: usize) ->
 /// on `subspaces` subspace images, on `threads` worker threads; count each measured pair the
 /// render finishes with its own parts as one more (the ready stones' sphere with a 512^2 tile
 /// peaked 107-149 MB higher with its 8 finishes, 51-71 bytes a texel each, and 565-607 MB
-/// in all against an estimate of about 800 MB).
+/// in all against the 814 MB this estimate gives them on two threads).
 /// The textures are synthesized like any image ([`synthesis_bytes`]).
 pub fn render_bytes(pixels: usize, texture: usize, subspaces: usize, threads: usize) -> u64 {
     let texels = texture as u64 * texture as u64;

@@ -92,6 +92,26 @@ pub struct SynthesisCache {
     noise: NoiseBank,
 }
 
+/// The relief's relighting of an image for one (view, light): the shading factor (rows, cols)
+/// and the view's parallax warp, each where there is one ([`MaterialModel::relighting`]).
+#[derive(Default)]
+struct Relighting {
+    factor: Option<Array2<f64>>,
+    warp: Option<parallax::ViewWarp>,
+}
+
+impl Relighting {
+    fn apply(&self, mut image: Array3<f32>) -> Array3<f32> {
+        if let Some(factor) = &self.factor {
+            scale_pixels(&mut image, factor);
+        }
+        match &self.warp {
+            Some(warp) => warp.apply(&image),
+            None => image,
+        }
+    }
+}
+
 /// A measured pair's finish, shape (3, rows, cols), shared by the cache and its users.
 pub type Finish = Arc<Array3<f32>>;
 
@@ -675,9 +695,20 @@ impl MaterialModel {
         view: &Direction,
         light: &Direction,
     ) -> Result<Array3<f32>> {
-        let mut out = self.relit_image(cache, view, light)?;
-        // The cluster's subspace image was matched at its representative's light only; the
-        // measured lightness of the requested light itself finishes it.
+        let out = self.relit_image(cache, view, light)?;
+        self.with_light_tables(out, cache, view, light)
+    }
+
+    /// `out`, relit for (`view`, `light`), given the requested light's measured lightness and
+    /// colours where the model stores light tables: the cluster's subspace image was matched
+    /// at its representative's light only.
+    fn with_light_tables(
+        &self,
+        mut out: Array3<f32>,
+        cache: &SynthesisCache,
+        view: &Direction,
+        light: &Direction,
+    ) -> Result<Array3<f32>> {
         if let Some(tables) = self.light_lightness()
             && let Some(target) = light_target(self, tables, view, light)?
         {
@@ -706,7 +737,7 @@ impl MaterialModel {
         let weights = self.weights_by_cluster(view, light, true)?;
         let blend = self.blend(cache, &weights)?;
         let own = self.with_own_parts(blend, cache, (view, light), &weights)?;
-        self.relit(own, cache, view, light)
+        Ok(self.relighting(cache, view, light)?.apply(own))
     }
 
     /// The subspace images blended by `weights` (per cluster, the pairs' weights times their
@@ -780,23 +811,22 @@ impl MaterialModel {
         Ok(out)
     }
 
-    /// `out` relit for `light` by the cache's relief and seen from `view` with its parallax;
-    /// as it is without a range map.
-    fn relit(
+    /// How the cache's relief relights an image for `light` ([`bump_relight`]'s factor) and
+    /// shows it from `view` (its parallax); nothing without a range map.
+    fn relighting(
         &self,
-        mut out: Array3<f32>,
         cache: &SynthesisCache,
         view: &Direction,
         light: &Direction,
-    ) -> Result<Array3<f32>> {
-        if let Some(heights) = &cache.heights {
-            let shading = self.bump_shading(light)?;
-            bump_relight(&mut out, heights, cache.options.edges(), light, shading);
-            if let Some(warp) = parallax::view_warp(heights, cache.options.edges(), view.vector()) {
-                out = warp.apply(&out);
-            }
-        }
-        Ok(out)
+    ) -> Result<Relighting> {
+        let Some(heights) = &cache.heights else {
+            return Ok(Relighting::default());
+        };
+        let edges = cache.options.edges();
+        Ok(Relighting {
+            factor: relief_factor(heights, edges, light, self.bump_shading(light)?),
+            warp: parallax::view_warp(heights, edges, view.vector()),
+        })
     }
 
     /// Whether the measured pair (`view`, `light`) has parts of its own beyond its cluster's
@@ -854,9 +884,14 @@ impl MaterialModel {
         if let Some(done) = lock().get(&(view, light)) {
             return Ok(Some(Arc::clone(done)));
         }
+        // One blend and one relighting serve the plain image and the finished one.
         let weights = self.weights_by_cluster(&v, &l, true)?;
-        let plain = self.relit(self.blend(cache, &weights)?, cache, &v, &l)?;
-        let finish = Arc::new(self.image_from_cache(cache, &v, &l)? - plain);
+        let blend = self.blend(cache, &weights)?;
+        let relighting = self.relighting(cache, &v, &l)?;
+        let plain = relighting.apply(blend.clone());
+        let own = self.with_own_parts(blend, cache, (&v, &l), &weights)?;
+        let finished = self.with_light_tables(relighting.apply(own), cache, &v, &l)?;
+        let finish = Arc::new(finished - plain);
         let mut done = lock();
         Ok(Some(Arc::clone(
             done.entry((view, light)).or_insert(finish),

@@ -45,7 +45,7 @@ pub struct Args {
     /// when the window opens, and every measured pair's finish where the model keeps light
     /// tables or light weights (see `render --help`), so the start-up cost grows with its
     /// square times the clusters and pairs (the ready stones at 256: 20 clusters in 0.5 s,
-    /// 81 finishes in 2.7 s on two cores).
+    /// 81 finishes in 2.0 s on two cores).
     #[arg(
         long,
         visible_alias = "texture-size",

@@ -52,11 +52,10 @@ pub struct MaterialTables {
     pub pair_layer: Vec<u32>,
     /// Per (view * lights + light), the pair's gain ([`MaterialModel::pair_gain`]).
     pub pair_gain: Vec<f32>,
-    /// The finishes of the measured pairs with parts of their own that the scene draws on
-    /// ([`MaterialModel::pair_finish`]: light tables, a light's own detail), in layer order.
-    pub finishes: Vec<Finish>,
-    /// Per (view * lights + light), the layer of its pair's finish or `u32::MAX`.
-    pub finish_layer: Vec<u32>,
+    /// The measured (view, light) pairs with parts of their own that the scene draws on and
+    /// their finishes ([`MaterialModel::pair_finish`]: light tables, a light's own detail), in
+    /// layer order.
+    pub finishes: Vec<((usize, usize), Finish)>,
     /// Measured views and lights.
     pub counts: (usize, usize),
     /// Direction tables of the views and of the lights.
@@ -134,20 +133,15 @@ impl MaterialTables {
         let pair_gain = (0..nv * nl)
             .map(|i| model.pair_gain(i / nl, i % nl) as f32)
             .collect();
-        let made: Vec<((usize, usize), Finish)> = pairs
+        let finishes = pairs
             .par_iter()
             .filter_map(|&(v, l)| {
                 let finish = model.pair_finish(cache, v, l).transpose()?;
                 Some(finish.map(|f| ((v, l), f)))
             })
             .collect::<std::result::Result<_, _>>()?;
-        let mut finish_layer = vec![u32::MAX; nv * nl];
-        for (layer, ((v, l), _)) in made.iter().enumerate() {
-            finish_layer[v * nl + l] = layer as u32;
-        }
         Ok(Self {
-            finishes: made.into_iter().map(|(_, f)| f).collect(),
-            finish_layer,
+            finishes,
             size: cache.options().rows,
             tile: cache.options().rows,
             clusters,
@@ -376,7 +370,7 @@ impl GpuMaterial {
             })?
         } else {
             let mut data = Vec::new();
-            for f in &tables.finishes {
+            for (_, f) in &tables.finishes {
                 push_mip_chain(&mut data, tile, skip, |y, x| {
                     [f[[0, y, x]], f[[1, y, x]], f[[2, y, x]], 0.0]
                 });
@@ -402,10 +396,13 @@ impl GpuMaterial {
         })?;
         let common = CommonBuffers::new(ctx, (&tables.view_lut, &tables.light_lut))?;
         // Per pair, its cluster's layer and its finish's, as `pair_layer`'s x and y.
-        let layers: Vec<u32> = (tables.pair_layer.iter())
-            .zip(&tables.finish_layer)
-            .flat_map(|(&c, &f)| [c, f])
+        let nl = tables.counts.1;
+        let mut layers: Vec<u32> = (tables.pair_layer.iter())
+            .flat_map(|&c| [c, u32::MAX])
             .collect();
+        for (layer, &((v, l), _)) in tables.finishes.iter().enumerate() {
+            layers[2 * (v * nl + l) + 1] = layer as u32;
+        }
         let pair_layer = storage_buffer(ctx, "pair layers", bytemuck::cast_slice(&layers))?;
         let pair_gain = storage_buffer(ctx, "pair gains", bytemuck::cast_slice(&tables.pair_gain))?;
         let ones = vec![1.0f32; super::lut::SHADING_GRID * super::lut::SHADING_GRID];
