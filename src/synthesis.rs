@@ -843,6 +843,15 @@ impl MaterialModel {
             || weighed(self.periodic().and_then(|p| p.light_weights.as_ref()))
     }
 
+    /// Every measured pair with parts of its own ([`MaterialModel::has_own_parts`]), view-major.
+    pub fn pairs_with_own_parts(&self) -> Vec<(usize, usize)> {
+        let lights = self.lights().len();
+        (0..self.views().len() * lights)
+            .map(|i| (i / lights, i % lights))
+            .filter(|&(v, l)| self.has_own_parts(v, l))
+            .collect()
+    }
+
     /// What the measured pair (`view`, `light`)'s own parts (its light's period and exemplar
     /// detail, its light tables) add to its image, at its measured directions, shape (3, rows,
     /// cols) of the cache: [`MaterialModel::image_from_cache`] less its subspace image at its

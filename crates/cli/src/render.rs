@@ -189,13 +189,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         global.check_memory(
             format!("render with a {texture}^2 tile"),
             need(texture),
-            |budget| {
-                let fits = (5..=13)
-                    .map(|p| 1usize << p)
-                    .rev()
-                    .find(|&s| need(s) <= budget);
-                fits.map_or("nothing fits".into(), |s| format!("--tile {s} fits"))
-            },
+            |budget| tile_that_fits(need, budget),
         )?;
         let options = ModelRenderOptions {
             mapping,
@@ -307,4 +301,14 @@ enum MaterialReport<'a> {
         model_width: usize,
         model_height: usize,
     },
+}
+
+/// The hint of a refused `render` or `view`: the largest `--tile` (32 to 8192 texels) whose
+/// peak `need` is within `budget`, or that nothing fits.
+pub(super) fn tile_that_fits(need: impl Fn(usize) -> u64, budget: u64) -> String {
+    let fits = (5..=13)
+        .map(|p| 1usize << p)
+        .rev()
+        .find(|&s| need(s) <= budget);
+    fits.map_or("nothing fits".into(), |s| format!("--tile {s} fits"))
 }

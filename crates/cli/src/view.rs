@@ -3,11 +3,13 @@
 use std::path::PathBuf;
 
 use btfmrf::btf::Direction;
+use btfmrf::memory;
 use btfmrf::source::AnyModel;
 use btfmrf_render::viewer::{ViewerOptions, run_viewer};
 use btfmrf_render::{Mapping, MeshKind};
 
 use super::Global;
+use super::render::tile_that_fits;
 use super::synthesize::{parse_direction, parse_size};
 
 /// Open a window showing a model on a mesh, rendered live.
@@ -64,7 +66,7 @@ pub struct Args {
     screenshot: Option<PathBuf>,
 }
 
-pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
+pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     let (rows, cols) = args.size;
     btfmrf_render::frame::check_size(u32::try_from(cols)?, u32::try_from(rows)?)?;
     let model = match AnyModel::open(&args.model)? {
@@ -74,6 +76,16 @@ pub fn run(args: Args, _global: &Global) -> anyhow::Result<()> {
             args.model.display()
         ),
     };
+    // Every cluster and every pair's finish at the tile's side, as `render` counts them.
+    btfmrf_render::check_tile(&model, args.tile)?;
+    let textures = model.subspaces().len() + model.pairs_with_own_parts().len();
+    let threads = memory::worker_threads();
+    let need = |tile| memory::render_bytes(rows * cols, tile, textures, threads);
+    global.check_memory(
+        format!("view with a {}^2 tile", args.tile),
+        need(args.tile),
+        |budget| tile_that_fits(need, budget),
+    )?;
     let mut meshes = vec![args.mesh.clone()];
     for kind in [
         MeshKind::Sphere,

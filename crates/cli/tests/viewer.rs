@@ -123,3 +123,22 @@ fn the_viewer_without_a_display_fails_cleanly() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(stderr.contains("error: window"), "{stderr}");
 }
+
+#[test]
+fn the_viewer_over_the_memory_budget_is_refused_before_any_window() {
+    // The ready stones finish every frontal light's pair (81) beside their 20 clusters.
+    let model = common::repo().join("models/stones.btfm");
+    let out = Command::new(env!("CARGO_BIN_EXE_btfmrf"))
+        .args(["view", model.to_str().unwrap(), "--tile", "2048"])
+        .args(["--memory-limit", "1G"])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .env_remove("WAYLAND_SOCKET")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("view with a 2048^2 tile"), "{stderr}");
+    assert!(stderr.contains("--tile 256 fits"), "{stderr}");
+    assert!(!stderr.contains("error: window"), "{stderr}");
+}

@@ -143,11 +143,7 @@ impl App<'_> {
             },
         )?;
         // Camera and light go anywhere: every pair with parts of its own is finished.
-        let (nv, nl) = (model.views().len(), model.lights().len());
-        let own: Vec<(usize, usize)> = (0..nv * nl)
-            .map(|i| (i / nl, i % nl))
-            .filter(|&(v, l)| model.has_own_parts(v, l))
-            .collect();
+        let own = model.pairs_with_own_parts();
         let tables = MaterialTables::new(model, &cache, None, &own)?;
         let material = GpuMaterial::new(&ctx, &pass, &cache, &tables)?;
         let mut meshes = Vec::new();
