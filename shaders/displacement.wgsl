@@ -3,11 +3,15 @@
 
 @vertex
 fn vs_main(in: VertexInput) -> VertexOutput {
-    // Blended across turned face edges like the shading, so both sides of an edge move alike.
-    let w = seam_weights(in.seam);
-    let height = w.x * textureSampleLevel(relief, tex_sampler, in.uv, 0.0).w
-        + w.y * textureSampleLevel(relief, tex_sampler, in.seam_uv.xy, 0.0).w
-        + w.z * textureSampleLevel(relief, tex_sampler, in.seam_uv.zw, 0.0).w;
+    // Cut across turned face edges like the shading (seam_cut), so both sides of an edge move
+    // alike and the surface follows the texture the fragments show.
+    let h = vec3<f32>(
+        textureSampleLevel(relief, tex_sampler, in.uv, 0.0).w,
+        textureSampleLevel(relief, tex_sampler, in.seam_uv.xy, 0.0).w,
+        textureSampleLevel(relief, tex_sampler, in.seam_uv.zw, 0.0).w,
+    );
+    let f = vec3<f32>(height_feature(h.x), height_feature(h.y), height_feature(h.z));
+    let height = dot(seam_cut(seam_weights(in.seam), f), h);
     let moved = in.position + normalize(in.normal) * height * globals.params.z;
     return transform(in, moved);
 }

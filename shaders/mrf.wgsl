@@ -34,8 +34,9 @@ const NO_LAYER: u32 = 0xffffffffu;
 @group(0) @binding(9) var<storage, read> mean_shade: array<f32>;
 // Per measured light, the bump strength k of the shading factor 1 + k (s - 1).
 @group(0) @binding(10) var<storage, read> light_strength: array<f32>;
-// Per (view * lights + light), the measured pair's gain (MaterialModel::pair_gain).
-@group(0) @binding(11) var<storage, read> pair_gain: array<f32>;
+// Per (view * lights + light): x, the measured pair's gain (MaterialModel::pair_gain); yzw,
+// its mean colour (x times its cluster's tile mean, plus its finish's mean when planned).
+@group(0) @binding(11) var<storage, read> pair_shade: array<vec4<f32>>;
 // The range map's heights (tile texels above their mean) in single precision, read unfiltered
 // for the view parallax and the cast shadows (1 x 1 without a range map).
 @group(0) @binding(12) var ray_heights: texture_2d<f32>;
@@ -155,7 +156,7 @@ fn seen_uv(uv: vec2<f32>, v: vec3<f32>) -> vec2<f32> {
 // Clusters that were not synthesized (outside the planned set) are skipped and the weights
 // renormalised.
 // `ddx`, `ddy`: the screen derivatives of in.uv (taken by the caller, in uniform control flow).
-fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
+fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> Shaded {
     let dirs = tangent_directions(in);
     let v = dirs.v;
     let l = dirs.l;
@@ -163,7 +164,7 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
     let uv = seen_uv(in.uv, v);
     let relief_here = textureSampleGrad(relief, tex_sampler, uv, ddx, ddy);
     if (l.z <= globals.limits.z) {
-        return vec4<f32>(0.0, 0.0, 0.0, 1.0);
+        return Shaded(vec4<f32>(0.0, 0.0, 0.0, 1.0), vec3<f32>(0.0));
     }
     let ql = project_dir(l, globals.limits.y);
     let iv = interpolate_dir(project_dir(v, globals.limits.x), true);
@@ -171,6 +172,7 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
     var sum = vec3<f32>(0.0);
     var finish = vec3<f32>(0.0);
     var total = 0.0;
+    var mean_colour = vec3<f32>(0.0);
     for (var a = 0; a < 3; a++) {
         for (var b = 0; b < 3; b++) {
             let w = iv.weight[a] * il.weight[b];
@@ -179,11 +181,12 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
                 let layer = pair_layer[pair];
                 if (layer.x != NO_LAYER) {
                     let texel = textureSampleGrad(subspaces, tex_sampler, uv, layer.x, ddx, ddy).rgb;
-                    sum += w * pair_gain[pair] * texel;
+                    sum += w * pair_shade[pair].x * texel;
                     total += w;
                     if (layer.y != NO_LAYER) {
                         finish += w * textureSampleGrad(finishes, tex_sampler, uv, layer.y, ddx, ddy).rgb;
                     }
+                    mean_colour += w * pair_shade[pair].yzw;
                 }
             }
         }
@@ -202,23 +205,88 @@ fn shade_mrf(in: VertexOutput, ddx: vec2<f32>, ddy: vec2<f32>) -> vec4<f32> {
         }
     }
     colour += finish / max(total, 1e-12);
-    return vec4<f32>(colour * falloff, 1.0);
+    return Shaded(vec4<f32>(colour * falloff, 1.0), mean_colour / max(total, 1e-12) * falloff);
 }
 
-// shade_mrf blended across turned face edges (seam_weights): the frame turns and the texture
-// cross-fades gradually.
+// A fragment's colour, and its mapping's mean colour: the pairs' mean colours (pair_shade)
+// blended with the same weights, unrelit.
+struct Shaded {
+    colour: vec4<f32>,
+    mean: vec3<f32>,
+}
+
+// Across a turned face edge the mappings are cut, not cross-faded: each candidate mapping's
+// ranking is its seam weight times SEAM_CUT_BIAS plus its feature in [0, 1] (the relief's
+// height, or the colour's luminance without a range map), and the highest wins (a soft
+// maximum over SEAM_CUT_SOFTNESS), so the cut runs where a stone of one mapping meets the
+// mortar of the other instead of two layouts showing through each other. Where one weight
+// leads by more than 1 / SEAM_CUT_BIAS its mapping wins whatever the features.
+const SEAM_CUT_BIAS: f32 = 2.0;
+const SEAM_CUT_SOFTNESS: f32 = 0.03;
+
+// The shares of up to 3 mappings (seam_weights `w`, features `f` in [0, 1]): a soft maximum
+// of f + SEAM_CUT_BIAS * w over the mappings with a weight.
+fn seam_cut(w: vec3<f32>, f: vec3<f32>) -> vec3<f32> {
+    let rank = select(vec3<f32>(-1e4), f + SEAM_CUT_BIAS * w, w > vec3<f32>(0.0));
+    let top = max(max(rank.x, rank.y), rank.z);
+    let e = exp((rank - vec3<f32>(top)) / SEAM_CUT_SOFTNESS);
+    return e / (e.x + e.y + e.z);
+}
+
+// The relief's height at uv as a feature in [0, 1] (0 at the lowest, 1 at the highest).
+fn height_feature(height: f32) -> f32 {
+    return clamp((height - globals.relief.y) / max(globals.relief.x - globals.relief.y, 1e-6), 0.0, 1.0);
+}
+
+fn luminance(rgb: vec3<f32>) -> f32 {
+    return dot(rgb, vec3<f32>(0.2126, 0.7152, 0.0722));
+}
+
+// shade_mrf across turned face edges (seam_weights, seam_cut): each mapping in reach shades
+// the fragment in its own frame, and the cut picks one; the winner's colour is scaled by the
+// weighted mean of the mappings' mean colours over its own, so that the light's brightness
+// in the turned frames (which changes with the light's azimuth on real captures) still
+// turns gradually over the band instead of stepping at the cut.
 fn shade_mrf_blended(in: VertexOutput) -> vec4<f32> {
     let w = seam_weights(in.seam);
     let ddx = dpdx(vec4<f32>(in.uv, in.seam_uv.xy));
     let ddy = dpdy(vec4<f32>(in.uv, in.seam_uv.xy));
     let ddx_v = dpdx(in.seam_uv.zw);
     let ddy_v = dpdy(in.seam_uv.zw);
-    var colour = w.x * shade_mrf(in, ddx.xy, ddy.xy);
+    let cut = w.y > 0.0 || w.z > 0.0;
+    let own = shade_mrf(in, ddx.xy, ddy.xy);
+    if (!cut) {
+        return own.colour;
+    }
+    var colours = array<vec3<f32>, 3>(own.colour.rgb, vec3<f32>(0.0), vec3<f32>(0.0));
+    var means = array<vec3<f32>, 3>(own.mean, vec3<f32>(0.0), vec3<f32>(0.0));
     if (w.y > 0.0) {
-        colour += w.y * shade_mrf(turned(in, in.seam.x, in.seam_uv.xy), ddx.zw, ddy.zw);
+        let s = shade_mrf(turned(in, in.seam.x, in.seam_uv.xy), ddx.zw, ddy.zw);
+        colours[1] = s.colour.rgb;
+        means[1] = s.mean;
     }
     if (w.z > 0.0) {
-        colour += w.z * shade_mrf(turned(in, in.seam.z, in.seam_uv.zw), ddx_v, ddy_v);
+        let s = shade_mrf(turned(in, in.seam.z, in.seam_uv.zw), ddx_v, ddy_v);
+        colours[2] = s.colour.rgb;
+        means[2] = s.mean;
     }
-    return colour;
+    var f: vec3<f32>;
+    if (globals.params.y > 0.5) {
+        f = vec3<f32>(
+            height_feature(textureSampleGrad(relief, tex_sampler, in.uv, ddx.xy, ddy.xy).w),
+            height_feature(textureSampleGrad(relief, tex_sampler, in.seam_uv.xy, ddx.zw, ddy.zw).w),
+            height_feature(textureSampleGrad(relief, tex_sampler, in.seam_uv.zw, ddx_v, ddy_v).w),
+        );
+    } else {
+        let y = vec3<f32>(luminance(colours[0]), luminance(colours[1]), luminance(colours[2]));
+        f = y / max(max(max(y.x, y.y), y.z), 1e-6);
+    }
+    let shares = seam_cut(w, f);
+    let mean = w.x * means[0] + w.y * means[1] + w.z * means[2];
+    var colour = vec3<f32>(0.0);
+    for (var i = 0; i < 3; i++) {
+        let ratio = select(mean / means[i], vec3<f32>(1.0), means[i] <= vec3<f32>(1e-6));
+        colour += shares[i] * colours[i] * clamp(ratio, vec3<f32>(0.25), vec3<f32>(4.0));
+    }
+    return vec4<f32>(colour, 1.0);
 }

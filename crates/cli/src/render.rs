@@ -161,6 +161,8 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
         Renderer::new()?.render_material(Material::Lpca(&model), &mesh, &scene)?
     } else {
         let model = format::read(&args.model)?;
+        // Checked before the memory estimate squares it.
+        btfmrf_render::check_tile(&model, args.tile)?;
         // The subspace images are synthesized at the tile's side, whatever the texture size,
         // and so are the finishes of the measured pairs with parts of their own that the
         // surface draws on (each about a subspace image's memory).

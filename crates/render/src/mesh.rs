@@ -29,8 +29,8 @@ pub struct Vertex {
     /// away; this frame's weight is 1). All zero on meshes whose frames run on continuously.
     pub seam: [f32; 4],
     /// This point's texture coordinates on the face beyond the edge along u, then along v
-    /// (that face's mapping continued past its edge), so the texture is cross-faded there too;
-    /// `uv` twice where there is no such face.
+    /// (that face's mapping continued past its edge), so the shaders can cut between the two
+    /// mappings there; `uv` twice where there is no such face.
     pub seam_uv: [f32; 4],
 }
 
@@ -38,7 +38,8 @@ pub struct Vertex {
 /// Where a tile meets itself turned (6 edges of the inflated-cube sphere) the light's azimuth
 /// in the tangent frame jumps by the turn, and a measured material whose images depend on the
 /// azimuth (every real RTI capture, whose lamp brightness varies around the dome) showed the
-/// edge as a sharp brightness wedge; blended, the frame turns gradually over a band.
+/// edge as a sharp brightness wedge; over this band the shaders cut between the mappings
+/// along the relief and turn the brightness gradually (shaders/mrf.wgsl, `seam_cut`).
 pub const SEAM_BAND: f32 = 0.25;
 
 /// Rotations below this (radians) are the same frame.
@@ -259,10 +260,11 @@ impl Mesh {
     /// whole number of texture repetitions, about `repeats` per 2 units of length like the
     /// plane, so the tileable texture runs on seamlessly across the 4 faces around the
     /// equator and from the front one (+z) onto the top and bottom; across the other 6 edges
-    /// the tile meets itself turned by a quarter or half turn. Across every edge the frames,
-    /// the texture and the heights are cross-faded over a quarter of a face
-    /// ([`Vertex::seam`], [`Vertex::seam_uv`]), so nothing steps there: not the shading, the
-    /// texture, nor (under displacement) the surface.
+    /// the tile meets itself turned by a quarter or half turn. Within a quarter of a face of
+    /// every edge a fragment sees both faces' mappings ([`Vertex::seam`],
+    /// [`Vertex::seam_uv`]): the shaders cut between them along the relief and turn the
+    /// brightness gradually, so neither the shading, nor the texture's layout, nor (under
+    /// displacement) the surface steps at the edge.
     pub fn sphere(cells: u32, repeats: f32) -> Self {
         use std::f32::consts::FRAC_PI_4;
         // A face edge is a quarter of the equator, pi / 2 long.

@@ -404,7 +404,31 @@ impl GpuMaterial {
             layers[2 * (v * nl + l) + 1] = layer as u32;
         }
         let pair_layer = storage_buffer(ctx, "pair layers", bytemuck::cast_slice(&layers))?;
-        let pair_gain = storage_buffer(ctx, "pair gains", bytemuck::cast_slice(&tables.pair_gain))?;
+        // Per pair, its gain and its mean colour (the gain times its cluster's tile mean, plus
+        // its finish's mean): what the shader blends to turn the brightness across a cut.
+        let channel_means = |image: &Array3<f32>| {
+            [0, 1, 2].map(|c| image.index_axis(ndarray::Axis(0), c).mean().unwrap_or(0.0))
+        };
+        let layer_means: Vec<[f32; 3]> = planes.iter().map(|p| channel_means(p)).collect();
+        let mut pair_shade: Vec<[f32; 4]> = (tables.pair_layer.iter().zip(&tables.pair_gain))
+            .map(|(&layer, &gain)| {
+                let [r, g, b] = layer_means
+                    .get(layer as usize)
+                    .map_or([0.0; 3], |m| m.map(|x| gain * x));
+                [gain, r, g, b]
+            })
+            .collect();
+        for ((v, l), f) in &tables.finishes {
+            let shade = &mut pair_shade[v * nl + l];
+            for (c, m) in channel_means(f).into_iter().enumerate() {
+                shade[c + 1] += m;
+            }
+        }
+        let pair_shade = storage_buffer(
+            ctx,
+            "pair gains and means",
+            bytemuck::cast_slice(&pair_shade),
+        )?;
         let ones = vec![1.0f32; super::lut::SHADING_GRID * super::lut::SHADING_GRID];
         let shading = tables.mean_shading.as_ref().map_or(&ones, |m| &m.values);
         let mean_shade = storage_buffer(ctx, "mean shading", bytemuck::cast_slice(shading))?;
@@ -464,7 +488,7 @@ impl GpuMaterial {
             },
             wgpu::BindGroupEntry {
                 binding: 11,
-                resource: pair_gain.as_entire_binding(),
+                resource: pair_shade.as_entire_binding(),
             },
             wgpu::BindGroupEntry {
                 binding: 13,
