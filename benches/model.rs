@@ -111,7 +111,13 @@ fn bench_synthesis(c: &mut Criterion) {
         // bands' driving noise is drawn once and shared.
         let all: Vec<usize> = (0..model.subspaces().len()).collect();
         group.bench_function(BenchmarkId::new("all_subspaces", kind.name()), |b| {
-            b.iter(|| black_box(model.synthesis_cache_for(&all, &o).expect("synthesis")))
+            b.iter(|| {
+                black_box(
+                    model
+                        .synthesis_cache_for(&all, &o, &NoProgress)
+                        .expect("synthesis"),
+                )
+            })
         });
     }
     group.finish();

@@ -33,6 +33,7 @@ use crate::model::{
 };
 use crate::mrf::noise::standard_normal;
 use crate::mrf::{BandModel, Levels, LevelsVisitor};
+use crate::progress::{NoProgress, Progress};
 
 /// The largest synthesized side, pixels (a 4096^2 image peaks near 2 GB; 8192^2 near 8 GB).
 pub const MAX_SIDE: usize = 8192;
@@ -377,7 +378,7 @@ impl MaterialModel {
     /// # Errors
     /// `k` out of range, or a size of zero, beyond [`MAX_SIDE`], or not tileable.
     pub fn synthesize_subspace(&self, k: usize, o: &SynthesisOptions) -> Result<Array3<f32>> {
-        let cache = self.synthesis_cache_for(&[k], o)?;
+        let cache = self.synthesis_cache_for(&[k], o, &NoProgress)?;
         let mut slots = cache.subspaces.into_iter();
         slots
             .nth(k)
@@ -628,7 +629,11 @@ impl MaterialModel {
         o: &SynthesisOptions,
     ) -> Result<Array3<f32>> {
         let clusters: Vec<usize> = self.subspace_weights(view, light)?.into_keys().collect();
-        self.image_from_cache(&self.synthesis_cache_for(&clusters, o)?, view, light)
+        self.image_from_cache(
+            &self.synthesis_cache_for(&clusters, o, &NoProgress)?,
+            view,
+            light,
+        )
     }
 
     /// An empty cache for synthesizing many images of one size and seed: each subspace image
@@ -1046,7 +1051,8 @@ impl MaterialModel {
     }
 
     /// A cache (see [`MaterialModel::synthesis_cache`]) holding exactly the subspace images
-    /// `clusters`, synthesized now, in parallel; the others stay unsynthesized.
+    /// `clusters`, synthesized now, in parallel; the others stay unsynthesized. `progress`
+    /// counts the images as they are done (task "synthesizing").
     ///
     /// # Errors
     /// An invalid size or a cluster index out of range.
@@ -1054,8 +1060,22 @@ impl MaterialModel {
         &self,
         clusters: &[usize],
         o: &SynthesisOptions,
+        progress: &dyn Progress,
     ) -> Result<SynthesisCache> {
         check(self, o)?;
+        progress.start("synthesizing", clusters.len() as u64);
+        let made = self.synthesized_now(clusters, o, progress);
+        progress.finish();
+        made
+    }
+
+    /// [`MaterialModel::synthesis_cache_for`] between its progress's start and finish.
+    fn synthesized_now(
+        &self,
+        clusters: &[usize],
+        o: &SynthesisOptions,
+        progress: &dyn Progress,
+    ) -> Result<SynthesisCache> {
         // One image alone draws its noise and lets it go (at 4096^2 a GMRF's noise is over
         // 500 MB); more than one keep it to share.
         let noise = if clusters.len() > 1 {
@@ -1063,18 +1083,18 @@ impl MaterialModel {
         } else {
             NoiseBank::transient()
         };
-        let first = |cache: SynthesisCache| -> Result<SynthesisCache> {
-            if let Some(&first) = clusters.first() {
-                self.subspace_from_cache(&cache, first)?;
-            }
-            Ok(cache)
+        let made = |cache: &SynthesisCache, k: usize| -> Result<()> {
+            self.subspace_from_cache(cache, k)?;
+            progress.advance(1);
+            Ok(())
         };
         // The exemplar detail every image needs comes with the heights where one quilt lays
         // both; the first image draws every band's noise, the others reuse it, in parallel.
-        let cache = first(self.relief_cache(o, noise))?;
-        clusters
-            .par_iter()
-            .try_for_each(|&k| self.subspace_from_cache(&cache, k).map(|_| ()))?;
+        let cache = self.relief_cache(o, noise);
+        if let Some((&first, rest)) = clusters.split_first() {
+            made(&cache, first)?;
+            rest.par_iter().try_for_each(|&k| made(&cache, k))?;
+        }
         Ok(cache)
     }
 

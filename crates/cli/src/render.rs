@@ -7,6 +7,7 @@ use btfmrf::btf::{Direction, io};
 use btfmrf::lpca;
 use btfmrf::memory;
 use btfmrf::model::format;
+use btfmrf::progress::NoProgress;
 use btfmrf::source::ModelFile;
 use btfmrf_render::lut::DirectionLut;
 use btfmrf_render::plan::plan_scene;
@@ -15,7 +16,7 @@ use btfmrf_render::{
 };
 
 use super::synthesize::{parse_direction, parse_size};
-use super::{Global, emit, emit_json};
+use super::{Bar, Global, emit, emit_json};
 
 /// Render a model on a mesh to an image, headless (works without a GPU through Mesa's
 /// software Vulkan driver, lavapipe).
@@ -158,7 +159,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
     };
     let out = if is_lpca {
         let model = lpca::format::read(&args.model)?;
-        Renderer::new()?.render_material(Material::Lpca(&model), &mesh, &scene)?
+        Renderer::new()?.render_material(Material::Lpca(&model), &mesh, &scene, &NoProgress)?
     } else {
         let model = format::read(&args.model)?;
         // Checked before the memory estimate squares it.
@@ -200,7 +201,12 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             max_texture_size: args.max_texture_size.clamp(32, 8192),
             tile: args.tile,
         };
-        Renderer::new()?.render_material(Material::Mrf(&model, options), &mesh, &scene)?
+        Renderer::new()?.render_material(
+            Material::Mrf(&model, options),
+            &mesh,
+            &scene,
+            &Bar::new(global),
+        )?
     };
     io::write_image(&args.out, &out.image)
         .with_context(|| format!("writing {}", args.out.display()))?;

@@ -8,9 +8,9 @@ use btfmrf::source::AnyModel;
 use btfmrf_render::viewer::{ViewerOptions, run_viewer};
 use btfmrf_render::{Mapping, MeshKind};
 
-use super::Global;
 use super::render::tile_that_fits;
 use super::synthesize::{parse_direction, parse_size};
+use super::{Bar, Global};
 
 /// Open a window showing a model on a mesh, rendered live.
 ///
@@ -111,6 +111,7 @@ pub fn run(args: Args, global: &Global) -> anyhow::Result<()> {
             frames: args.frames,
             screenshot: args.screenshot,
         },
+        &Bar::new(global),
     )?;
     Ok(())
 }

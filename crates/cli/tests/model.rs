@@ -358,7 +358,7 @@ fn a_cache_shares_noise_without_changing_any_image() {
                 ..opts(48, 5)
             };
             let all: Vec<usize> = (0..model.subspaces().len()).collect();
-            let cache = model.synthesis_cache_for(&all, &o).unwrap();
+            let cache = model.synthesis_cache_for(&all, &o, &NoProgress).unwrap();
             assert_eq!(cache.synthesized(), all.len());
             for &k in &all {
                 let alone = model.synthesize_subspace(k, &o).unwrap();

@@ -14,11 +14,13 @@ use btfmrf::btf::{Btf, Direction, io};
 use btfmrf::geometry::relight::Shadows;
 use btfmrf::lpca::{self, LpcaModel, LpcaOptions, Method};
 use btfmrf::model::{MaterialModel, RangeMap, format};
-use btfmrf::progress::NoProgress;
+use btfmrf::progress::{NoProgress, Progress};
 use btfmrf::synthesis::{SynthesisCache, SynthesisOptions};
 use btfmrf_render::headless::ModelRenderOptions;
 use btfmrf_render::scene::Projection;
-use btfmrf_render::{Camera, Light, Mapping, Mesh, MeshKind, RenderError, Renderer, Scene};
+use btfmrf_render::{
+    Camera, Light, Mapping, Material, Mesh, MeshKind, RenderError, RenderStats, Renderer, Scene,
+};
 use ndarray::Array3;
 
 /// A small 2D CAR model of the sponge (64 x 64, 8 clusters, with a range map), kept in the
@@ -301,6 +303,52 @@ fn the_gpu_adds_each_measured_pairs_own_parts_as_the_cpu_does() {
         .render_model(&model, &mesh, &flat_scene(128, measured[0]), &options)
         .unwrap();
     assert!(plain.stats.plan.finishes.is_empty());
+}
+
+/// Every task a progress is told of: (task, total, units advanced).
+#[derive(Default)]
+struct Tally(std::sync::Mutex<Vec<(String, u64, u64)>>);
+
+impl Progress for Tally {
+    fn start(&self, task: &str, total: u64) {
+        self.0.lock().unwrap().push((task.into(), total, 0));
+    }
+
+    fn advance(&self, n: u64) {
+        if let Some(last) = self.0.lock().unwrap().last_mut() {
+            last.2 += n;
+        }
+    }
+}
+
+/// A render's long work (synthesis, then the pairs' finishes, seconds each at a large tile)
+/// reports its progress: every subspace image it plans, then every pair it finishes.
+#[test]
+fn a_render_counts_its_subspace_images_then_its_finishes() {
+    let Some(renderer) = renderer() else { return };
+    let model = format::read(&common::repo().join("models/stones.btfm")).unwrap();
+    let (mesh, options) = bump_plane(128);
+    let tally = Tally::default();
+    let scene = flat_scene(64, Direction::new(37.0, 100.0));
+    let out = renderer
+        .render_material(Material::Mrf(&model, options), &mesh, &scene, &tally)
+        .unwrap();
+    let RenderStats::Mrf(stats) = &out.stats else {
+        panic!("an MRF render")
+    };
+    let (clusters, finishes) = (
+        stats.plan.clusters.len() as u64,
+        stats.plan.finishes.len() as u64,
+    );
+    assert!(clusters > 1 && finishes > 1, "{clusters} {finishes}");
+    let tasks = tally.0.into_inner().unwrap();
+    assert_eq!(
+        tasks,
+        [
+            ("synthesizing".to_string(), clusters, clusters),
+            ("finishing pairs".to_string(), finishes, finishes),
+        ]
+    );
 }
 
 #[test]

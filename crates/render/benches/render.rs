@@ -9,6 +9,7 @@ use std::path::Path;
 
 use btfmrf::btf::Direction;
 use btfmrf::model::format;
+use btfmrf::progress::NoProgress;
 use btfmrf::synthesis::SynthesisOptions;
 use btfmrf_render::lut::DirectionLut;
 use btfmrf_render::mrf::{GpuMaterial, MaterialTables};
@@ -37,8 +38,8 @@ fn frames(c: &mut Criterion) {
         tileable: true,
     };
     let all: Vec<usize> = (0..model.subspaces().len()).collect();
-    let cache = model.synthesis_cache_for(&all, &tile).unwrap();
-    let tables = MaterialTables::new(&model, &cache, None, &[]).unwrap();
+    let cache = model.synthesis_cache_for(&all, &tile, &NoProgress).unwrap();
+    let tables = MaterialTables::new(&model, &cache, None, &[], &NoProgress).unwrap();
     let material = GpuMaterial::new(&renderer.ctx, &renderer.mrf, &cache, &tables).unwrap();
     let scene = Scene {
         camera: Camera::orbit(Direction::new(30.0, 270.0), 3.2),
@@ -77,9 +78,11 @@ fn frames(c: &mut Criterion) {
     );
     let sphere = MeshKind::Sphere.build(64, 1.0).unwrap();
     let plan = plan_scene(&stones, &sphere, &scene, (&luts.0, &luts.1), (512, 512));
-    let cache = stones.synthesis_cache_for(&plan.clusters, &tile).unwrap();
+    let cache = stones
+        .synthesis_cache_for(&plan.clusters, &tile, &NoProgress)
+        .unwrap();
     for finishes in [&plan.finishes[..], &[]] {
-        let tables = MaterialTables::new(&stones, &cache, None, finishes).unwrap();
+        let tables = MaterialTables::new(&stones, &cache, None, finishes, &NoProgress).unwrap();
         let material = GpuMaterial::new(&renderer.ctx, &renderer.mrf, &cache, &tables).unwrap();
         let name = format!("mrf bump, ready stones, {} pair finishes", finishes.len());
         group.bench_function(name, |b| {

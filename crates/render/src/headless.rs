@@ -16,6 +16,7 @@ use super::scene::Scene;
 use super::{GpuContext, Mapping, Material, RenderError, Result, check_tile};
 use btfmrf::lpca::{LpcaModel, Method};
 use btfmrf::model::MaterialModel;
+use btfmrf::progress::{NoProgress, Progress};
 use btfmrf::synthesis::{SynthesisCache, SynthesisOptions};
 use rayon::prelude::*;
 
@@ -228,7 +229,8 @@ impl Renderer {
     }
 
     /// The whole job for either material: [`Renderer::render_model`] or
-    /// [`Renderer::render_lpca`].
+    /// [`Renderer::render_lpca`]; `progress` counts an MRF model's subspace images as they
+    /// are synthesized, then its pairs as they are finished.
     ///
     /// # Errors
     /// As theirs.
@@ -237,10 +239,11 @@ impl Renderer {
         material: Material<'_>,
         mesh: &Mesh,
         scene: &Scene,
+        progress: &dyn Progress,
     ) -> Result<RenderOutput> {
         Ok(match material {
             Material::Mrf(model, options) => self
-                .render_model(model, mesh, scene, &options)?
+                .render_model_counted(model, mesh, scene, &options, progress)?
                 .map_stats(RenderStats::Mrf),
             Material::Lpca(model) => self
                 .render_lpca(model, mesh, scene)?
@@ -294,6 +297,18 @@ impl Renderer {
         scene: &Scene,
         options: &ModelRenderOptions,
     ) -> Result<RenderOutput<MrfStats>> {
+        self.render_model_counted(model, mesh, scene, options, &NoProgress)
+    }
+
+    /// [`Renderer::render_model`] with its synthesis and finishes counted by `progress`.
+    fn render_model_counted(
+        &self,
+        model: &MaterialModel,
+        mesh: &Mesh,
+        scene: &Scene,
+        options: &ModelRenderOptions,
+        progress: &dyn Progress,
+    ) -> Result<RenderOutput<MrfStats>> {
         let job = MrfJob::new(model, mesh, scene, options.mapping)?;
         let tile = options.tile;
         check_tile(model, tile)?;
@@ -321,9 +336,9 @@ impl Renderer {
             seed: options.seed,
             tileable: true,
         };
-        let cache = model.synthesis_cache_for(&plan.clusters, &synthesis)?;
+        let cache = model.synthesis_cache_for(&plan.clusters, &synthesis, progress)?;
         let synthesized = plan.clusters.len();
-        self.finish(job, &cache, plan, synthesized)
+        self.finish(job, &cache, plan, synthesized, progress)
     }
 
     /// As [`Renderer::render_model`], drawing on (and adding to) `cache`, whose size, seed and
@@ -360,21 +375,22 @@ impl Renderer {
         missing
             .par_iter()
             .try_for_each(|&k| model.subspace_from_cache(cache, k).map(|_| ()))?;
-        self.finish(job, cache, plan, missing.len())
+        self.finish(job, cache, plan, missing.len(), &NoProgress)
     }
 
     /// Uploads what `cache` holds (`synthesized` of its subspace images new for this frame)
-    /// and renders `job`'s frame.
+    /// and the plan's finishes (counted by `progress`), and renders `job`'s frame.
     fn finish(
         &self,
         job: MrfJob<'_>,
         cache: &SynthesisCache,
         plan: ScenePlan,
         synthesized: usize,
+        progress: &dyn Progress,
     ) -> Result<RenderOutput<MrfStats>> {
         let (rows, cols) = (cache.options().rows, cache.options().cols);
         let model = job.model;
-        let tables = MaterialTables::new(model, cache, Some(job.luts), &plan.finishes)?
+        let tables = MaterialTables::new(model, cache, Some(job.luts), &plan.finishes, progress)?
             .at_resolution(plan.texture_size)?;
         let synthesis_seconds = job.start.elapsed().as_secs_f64();
         let start = Instant::now();

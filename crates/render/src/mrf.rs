@@ -16,6 +16,7 @@ use super::scene::Scene;
 use super::{GpuContext, Mapping, RenderError, Result};
 use btfmrf::geometry::relight::Shadows;
 use btfmrf::model::MaterialModel;
+use btfmrf::progress::Progress;
 use btfmrf::synthesis::{Finish, SynthesisCache};
 
 const MRF_WGSL: &str = include_str!("../../../shaders/mrf.wgsl");
@@ -85,9 +86,9 @@ pub struct ReliefHeights {
 
 impl MaterialTables {
     /// The tables for `model` with the clusters synthesized in `cache` and the finishes of
-    /// the measured `pairs` (made here where `cache` lacks them; pairs without parts of
-    /// their own are skipped); `luts` are the model's view and light tables, when already
-    /// built (else they are built here).
+    /// the measured `pairs` (made here where `cache` lacks them, counted by `progress` as
+    /// task "finishing pairs"; pairs without parts of their own are skipped); `luts` are the
+    /// model's view and light tables, when already built (else they are built here).
     ///
     /// # Errors
     /// A pair out of range, or a synthesis error while making a finish.
@@ -96,6 +97,7 @@ impl MaterialTables {
         cache: &SynthesisCache,
         luts: Option<(DirectionLut, DirectionLut)>,
         pairs: &[(usize, usize)],
+        progress: &dyn Progress,
     ) -> Result<Self> {
         let (view_lut, light_lut) = match luts {
             Some(l) => l,
@@ -133,13 +135,17 @@ impl MaterialTables {
         let pair_gain = (0..nv * nl)
             .map(|i| model.pair_gain(i / nl, i % nl) as f32)
             .collect();
+        progress.start("finishing pairs", pairs.len() as u64);
         let finishes = pairs
             .par_iter()
             .filter_map(|&(v, l)| {
-                let finish = model.pair_finish(cache, v, l).transpose()?;
-                Some(finish.map(|f| ((v, l), f)))
+                let finish = model.pair_finish(cache, v, l).transpose();
+                progress.advance(1);
+                Some(finish?.map(|f| ((v, l), f)))
             })
-            .collect::<std::result::Result<_, _>>()?;
+            .collect::<std::result::Result<_, _>>();
+        progress.finish();
+        let finishes = finishes?;
         Ok(Self {
             finishes,
             size: cache.options().rows,

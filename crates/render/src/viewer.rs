@@ -25,6 +25,7 @@ use super::scene::{Camera, Light, Scene};
 use super::{GpuContext, Mapping, RenderError, Result, check_tile};
 use btfmrf::btf::Direction;
 use btfmrf::model::MaterialModel;
+use btfmrf::progress::Progress;
 use btfmrf::synthesis::SynthesisOptions;
 
 /// Options of [`run_viewer`].
@@ -69,6 +70,8 @@ struct Viewer {
 
 struct App<'a> {
     model: &'a MaterialModel,
+    /// Counts the subspace images and the pairs' finishes made before the first frame.
+    progress: &'a dyn Progress,
     options: ViewerOptions,
     viewer: Option<Viewer>,
     error: Option<RenderError>,
@@ -141,10 +144,11 @@ impl App<'_> {
                 seed: o.seed,
                 tileable: true,
             },
+            self.progress,
         )?;
         // Camera and light go anywhere: every pair with parts of its own is finished.
         let own = model.pairs_with_own_parts();
-        let tables = MaterialTables::new(model, &cache, None, &own)?;
+        let tables = MaterialTables::new(model, &cache, None, &own, self.progress)?;
         let material = GpuMaterial::new(&ctx, &pass, &cache, &tables)?;
         let mut meshes = Vec::new();
         for kind in &o.meshes {
@@ -407,11 +411,16 @@ impl ApplicationHandler for App<'_> {
 }
 
 /// Opens the viewer window on `model` and runs until it is closed (or, with
-/// [`ViewerOptions::frames`], until that many frames are drawn).
+/// [`ViewerOptions::frames`], until that many frames are drawn); `progress` counts the
+/// subspace images and the pairs' finishes made before the first frame.
 ///
 /// # Errors
 /// No display (`DISPLAY`/`WAYLAND_DISPLAY` unset), no adapter, a synthesis or device error.
-pub fn run_viewer(model: &MaterialModel, options: ViewerOptions) -> Result<()> {
+pub fn run_viewer(
+    model: &MaterialModel,
+    options: ViewerOptions,
+    progress: &dyn Progress,
+) -> Result<()> {
     if options.meshes.is_empty() {
         return Err(RenderError::parameter("--mesh", "no mesh to show"));
     }
@@ -420,6 +429,7 @@ pub fn run_viewer(model: &MaterialModel, options: ViewerOptions) -> Result<()> {
     event_loop.set_control_flow(ControlFlow::Wait);
     let mut app = App {
         model,
+        progress,
         mapping: options.mapping,
         camera: Camera::orbit(options.view, 3.5),
         light: Light {
