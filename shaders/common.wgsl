@@ -23,7 +23,9 @@ struct Globals {
     counts: vec4<u32>,
     // x, y: where view and light directions are clamped (radians; 90 degrees, or the set's
     // lowest direction if below the horizon, as the CPU's DirectionSet::interpolate), z: the
-    // tangent-frame z at and below which the light is beyond the set's lowest light.
+    // tangent-frame z at and below which the light is beyond the set's lowest light, w: the
+    // z of the set's lowest light where lights past it fade (0: none do; see
+    // DirectionSet::irradiance_beyond_lowest on the CPU).
     limits: vec4<f32>,
     // The material's relief heights (see mrf.wgsl).
     relief: vec4<f32>,
@@ -217,7 +219,8 @@ fn seam_weights(seam: vec4<f32>) -> vec3<f32> {
 }
 
 // View and light of a fragment in its tangent frame (unit vectors), and the point light's
-// inverse-square falloff (1 for a directional light): what every BTF pipeline starts from.
+// inverse-square falloff (1 for a directional light) times the fade past the set's lowest
+// light (limits.w): what every BTF pipeline starts from.
 struct TangentDirections {
     v: vec3<f32>,
     l: vec3<f32>,
@@ -238,7 +241,12 @@ fn tangent_directions(in: VertexOutput) -> TangentDirections {
         l_world = globals.light.xyz - in.world;
         falloff = globals.params.x / max(dot(l_world, l_world), 1e-8);
     }
-    return TangentDirections(to_world * v_world, to_world * normalize(l_world), falloff);
+    let l = to_world * normalize(l_world);
+    // Past the set's lowest light the irradiance fades with the light's cosine.
+    if (globals.limits.w > 0.0) {
+        falloff *= clamp(l.z / globals.limits.w, 0.0, 1.0);
+    }
+    return TangentDirections(to_world * v_world, l, falloff);
 }
 
 // True for colour targets that clip to [0, 1] (an 8-bit window surface): the fragment's colour

@@ -7,7 +7,8 @@
 // highest and lowest relief heights (tile texels from the mean), z = 1 when the range map
 // casts shadows (0 when it does not). VIEW_PARALLAX (set before this file): the relief's view
 // parallax is marched (bump mapping).
-// Lights at or beyond the set's lowest light (globals.limits.z) leave a fragment black.
+// Lights at or beyond the set's lowest light (globals.limits.z) leave a fragment black; past
+// a set's lowest light they fade (tangent_directions).
 
 const SHADING_GRID: u32 = 64u;
 // Most one-texel steps of a shadow ray (the CPU's MAX_SHADOW_STEPS).

@@ -701,7 +701,12 @@ impl MaterialModel {
         light: &Direction,
     ) -> Result<Array3<f32>> {
         let out = self.relit_image(cache, view, light)?;
-        self.with_light_tables(out, cache, view, light)
+        let mut out = self.with_light_tables(out, cache, view, light)?;
+        let fade = self.lights().irradiance_beyond_lowest(light) as f32;
+        if fade < 1.0 {
+            out.mapv_inplace(|v| fade * v);
+        }
+        Ok(out)
     }
 
     /// `out`, relit for (`view`, `light`), given the requested light's measured lightness and

@@ -210,6 +210,29 @@ impl DirectionSet {
             .map(|(i, _)| i)
     }
 
+    /// The zenith angle of the set's lowest direction, degrees.
+    pub fn lowest_theta(&self) -> f64 {
+        self.directions
+            .iter()
+            .map(|s| s.theta_deg)
+            .fold(0.0, f64::max)
+    }
+
+    /// The share of the irradiance of a light at the set's lowest zenith angle that a light
+    /// from `d` brings: 1 within the sampled cap, `cos theta / cos theta_lowest` between the
+    /// lowest light and the horizon, 0 at and below it. [`DirectionSet::interpolate`]
+    /// continues the lowest lights' images past the cap unchanged, and a surface turning away
+    /// from a grazing light kept their brightness up to the horizon, then went black at once
+    /// (a hard edge like a hole). A set that reaches the horizon or below it (an RTI dome)
+    /// fades nothing: below the horizon it stands for its lowest lights.
+    pub fn irradiance_beyond_lowest(&self, d: &Direction) -> f64 {
+        let lowest = self.lowest_theta();
+        if lowest >= 90.0 || d.theta_deg <= lowest {
+            return 1.0;
+        }
+        (d.theta_deg.to_radians().cos() / lowest.to_radians().cos()).clamp(0.0, 1.0)
+    }
+
     /// The three sampled directions around `d` and their barycentric weights (>= 0, sum 1).
     ///
     /// The directions are triangulated (Delaunay) in the azimuthal-equidistant projection
@@ -229,11 +252,7 @@ impl DirectionSet {
                 format!("theta={} phi={} is not finite", d.theta_deg, d.phi_deg),
             ));
         }
-        let lowest = self
-            .directions
-            .iter()
-            .map(|s| s.theta_deg)
-            .fold(90.0, f64::max);
+        let lowest = self.lowest_theta().max(90.0);
         let q = project(&Direction::new(d.theta_deg.clamp(0.0, lowest), d.phi_deg));
         let points: Vec<[f64; 2]> = self.directions.iter().map(project).collect();
         let triangles = self.triangles.get_or_init(|| triangulate(&points));
@@ -499,6 +518,30 @@ mod tests {
             }
             last = Some(full);
         }
+    }
+
+    #[test]
+    fn lights_past_the_lowest_fade_with_their_cosine_to_the_horizon() {
+        let bonn = DirectionSet::bonn();
+        assert_abs_diff_eq!(bonn.lowest_theta(), 75.0, epsilon = 1e-9);
+        let fade = |theta: f64| bonn.irradiance_beyond_lowest(&Direction::new(theta, 40.0));
+        for theta in [0.0, 30.0, 75.0] {
+            assert_eq!(fade(theta), 1.0);
+        }
+        let cos = |t: f64| t.to_radians().cos();
+        assert_abs_diff_eq!(fade(82.0), cos(82.0) / cos(75.0), epsilon = 1e-12);
+        assert_abs_diff_eq!(fade(90.0), 0.0, epsilon = 1e-12);
+        assert_eq!(fade(100.0), 0.0);
+        // Continuous at the lowest light, decreasing past it.
+        assert!(fade(75.001) > 0.9999 && fade(80.0) > fade(85.0));
+        // A dome that lists lights below the horizon fades nothing.
+        let mut dome: Vec<Direction> = bonn.iter().copied().collect();
+        dome.push(Direction::new(93.0, 10.0));
+        let dome = DirectionSet::new(dome).unwrap();
+        assert_eq!(
+            dome.irradiance_beyond_lowest(&Direction::new(91.0, 0.0)),
+            1.0
+        );
     }
 
     #[test]

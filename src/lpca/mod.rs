@@ -290,7 +290,8 @@ impl LpcaModel {
 
     /// The image for any view and light direction: the 3 nearest measured views times the 3
     /// nearest measured lights (barycentric weights, as in the paper's renderer, section 4.1),
-    /// up to 9 reconstructed images blended.
+    /// up to 9 reconstructed images blended, faded past the lowest light
+    /// ([`DirectionSet::irradiance_beyond_lowest`]).
     ///
     /// # Errors
     /// A non-finite direction.
@@ -301,10 +302,11 @@ impl LpcaModel {
     ) -> Result<Array3<f32>> {
         let wv = self.views.interpolate(view)?;
         let wl = self.lights.interpolate(light)?;
+        let fade = self.lights.irradiance_beyond_lowest(light) as f32;
         let mut out = Array3::<f32>::zeros((3, self.height, self.width));
         for a in wv {
             for b in wl {
-                let weight = (a.weight * b.weight) as f32;
+                let weight = fade * (a.weight * b.weight) as f32;
                 if weight > 0.0 {
                     let im = self.reconstruct(a.index, b.index)?;
                     out.scaled_add(weight, &im);

@@ -235,13 +235,47 @@ fn assert_gpu_near_cpu(
 #[test]
 fn gpu_equals_the_cpu_reference_on_a_flat_plane() {
     let Some(renderer) = renderer() else { return };
-    // Measured and unmeasured lights (the latter interpolated from 3 nearest).
+    // Measured and unmeasured lights (the latter interpolated from 3 nearest), and one past
+    // the set's lowest (75 deg), faded.
     let lights = [
         Direction::new(45.0, 60.0),
         Direction::new(37.0, 100.0),
         Direction::new(68.0, 250.0),
+        Direction::new(82.0, 140.0),
     ];
     assert_gpu_matches_cpu(&renderer, &golden_model(), "plane", &lights, 0.0);
+}
+
+/// Past the set's lowest light (75 deg) a light's image is the lowest lights' (as the
+/// interpolation continues them) faded by `cos theta / cos 75`, down to black at the horizon.
+/// It was the lowest lights' unfaded, so a surface turning away from a grazing light kept
+/// their brightness up to the horizon and then went black at once: the demo's cloth under
+/// 75/60 showed two hard-edged black holes.
+#[test]
+fn past_the_lowest_light_the_image_fades_to_the_horizon() {
+    let mut parts = golden_model().into_parts();
+    // Without the relief, whose shading follows the light itself.
+    parts.range_map = None;
+    let model = MaterialModel::new(parts).unwrap();
+    let cache = tile_cache(&model, 64);
+    let frontal = Direction::new(0.0, 0.0);
+    let mean_at = |theta: f64| {
+        let light = Direction::new(theta, 30.0);
+        let image = model.image_from_cache(&cache, &frontal, &light).unwrap();
+        f64::from(image.mean().unwrap())
+    };
+    let lowest = mean_at(75.0);
+    assert!(lowest > 0.01, "{lowest}");
+    let cos = |t: f64| t.to_radians().cos();
+    for theta in [80.0, 85.0, 89.0] {
+        let ratio = mean_at(theta) / lowest;
+        let want = cos(theta) / cos(75.0);
+        assert!(
+            (ratio - want).abs() < 1e-3,
+            "{theta}: {ratio} against {want}"
+        );
+    }
+    assert!(mean_at(90.0) < 1e-6 * lowest);
 }
 
 #[test]

@@ -58,6 +58,9 @@ pub struct DirectionLut {
     /// Where queries are clamped, radians: 90 degrees, or the set's lowest direction if that
     /// lies below the horizon (real RTI domes), as [`DirectionSet::interpolate`] does.
     pub max_theta: f64,
+    /// The zenith angle of the set's lowest direction, radians: lights past it fade
+    /// ([`DirectionSet::irradiance_beyond_lowest`]).
+    pub lowest_theta: f64,
 }
 
 impl DirectionLut {
@@ -67,11 +70,8 @@ impl DirectionLut {
     /// Never for a valid set (interpolation of finite directions does not fail).
     pub fn new(set: &DirectionSet) -> Result<Self> {
         let points = set.iter().map(|d| project(d).map(|x| x as f32)).collect();
-        let max_theta = set
-            .iter()
-            .map(|d| d.theta_deg)
-            .fold(90.0, f64::max)
-            .to_radians();
+        let lowest_theta = set.lowest_theta().to_radians();
+        let max_theta = lowest_theta.max(std::f64::consts::FRAC_PI_2);
         let n = DIRECTION_GRID;
         let cells = (0..n * n)
             .into_par_iter()
@@ -89,6 +89,7 @@ impl DirectionLut {
             points,
             cells,
             max_theta,
+            lowest_theta,
         })
     }
 
@@ -97,6 +98,17 @@ impl DirectionLut {
     pub fn horizon_z(&self) -> f64 {
         if self.max_theta > HALF_PI {
             self.max_theta.cos()
+        } else {
+            0.0
+        }
+    }
+
+    /// The tangent-frame `z` of the set's lowest direction where lights past it fade
+    /// (`cos theta_lowest`), or 0 where none do (the set reaches the horizon or below): the
+    /// shader's twin of [`DirectionSet::irradiance_beyond_lowest`] is `min(1, z / this)`.
+    pub fn fade_z(&self) -> f64 {
+        if self.lowest_theta < HALF_PI {
+            self.lowest_theta.cos()
         } else {
             0.0
         }

@@ -115,12 +115,7 @@ impl MaterialTables {
         }
         let (nv, nl) = (model.views().len(), model.lights().len());
         // The zenith angle of the set's lowest light, degrees.
-        let lowest = model
-            .lights()
-            .as_slice()
-            .iter()
-            .map(|d| d.theta_deg)
-            .fold(0.0, f64::max);
+        let lowest = model.lights().lowest_theta();
         let casts_shadows = model
             .range_map()
             .is_some_and(|m| m.shadows == Shadows::Cast);

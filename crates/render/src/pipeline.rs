@@ -148,7 +148,7 @@ impl CommonBuffers {
                 luts.0.max_theta as f32,
                 luts.1.max_theta as f32,
                 luts.1.horizon_z() as f32,
-                0.0,
+                luts.1.fade_z() as f32,
             ],
             ..bytemuck::Zeroable::zeroed()
         };
