@@ -218,7 +218,9 @@ struct Shaded {
 
 // Across a turned face edge the mappings are cut, not cross-faded: each candidate mapping's
 // ranking is its seam weight times SEAM_CUT_BIAS plus its feature in [0, 1] (the relief's
-// height, or the colour's luminance without a range map), and the highest wins (a soft
+// height; without a range map none, and the cut is the face edge: ranked by luminance, the
+// brighter texture won everywhere, a band of bright specks on photographs of gravel and
+// grass and crossing mortar lines on brick), and the highest wins (a soft
 // maximum over SEAM_CUT_SOFTNESS), so the cut runs where a stone of one mapping meets the
 // mortar of the other instead of two layouts showing through each other. Where one weight
 // leads by more than 1 / SEAM_CUT_BIAS its mapping wins whatever the features: at 4 the cut
@@ -239,10 +241,6 @@ fn seam_cut(w: vec3<f32>, f: vec3<f32>) -> vec3<f32> {
 // The relief's height at uv as a feature in [0, 1] (0 at the lowest, 1 at the highest).
 fn height_feature(height: f32) -> f32 {
     return clamp((height - globals.relief.y) / max(globals.relief.x - globals.relief.y, 1e-6), 0.0, 1.0);
-}
-
-fn luminance(rgb: vec3<f32>) -> f32 {
-    return dot(rgb, vec3<f32>(0.2126, 0.7152, 0.0722));
 }
 
 // shade_mrf across turned face edges (seam_weights, seam_cut): each mapping in reach shades
@@ -273,16 +271,14 @@ fn shade_mrf_blended(in: VertexOutput) -> vec4<f32> {
         colours[2] = s.colour.rgb;
         means[2] = s.mean;
     }
-    var f: vec3<f32>;
+    // Without a range map the cut is the edge itself.
+    var f = vec3<f32>(0.0);
     if (globals.params.y > 0.5) {
         f = vec3<f32>(
             height_feature(textureSampleGrad(relief, tex_sampler, in.uv, ddx.xy, ddy.xy).w),
             height_feature(textureSampleGrad(relief, tex_sampler, in.seam_uv.xy, ddx.zw, ddy.zw).w),
             height_feature(textureSampleGrad(relief, tex_sampler, in.seam_uv.zw, ddx_v, ddy_v).w),
         );
-    } else {
-        let y = vec3<f32>(luminance(colours[0]), luminance(colours[1]), luminance(colours[2]));
-        f = y / max(max(max(y.x, y.y), y.z), 1e-6);
     }
     let shares = seam_cut(w, f);
     let mean = w.x * means[0] + w.y * means[1] + w.z * means[2];

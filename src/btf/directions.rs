@@ -224,7 +224,9 @@ impl DirectionSet {
     /// continues the lowest lights' images past the cap unchanged, and a surface turning away
     /// from a grazing light kept their brightness up to the horizon, then went black at once
     /// (a hard edge like a hole). A set that reaches the horizon or below it (an RTI dome)
-    /// fades nothing: below the horizon it stands for its lowest lights.
+    /// fades nothing: below the horizon it stands for its lowest lights. A photograph's one
+    /// light at the zenith fades every other light by its cosine, as a flat matte surface
+    /// would.
     pub fn irradiance_beyond_lowest(&self, d: &Direction) -> f64 {
         let lowest = self.lowest_theta();
         if lowest >= 90.0 || d.theta_deg <= lowest {
