@@ -568,13 +568,17 @@ fn turned_face_edges_cut_the_texture_instead_of_overlaying_two_layouts() {
         tile: 128,
         ..Default::default()
     };
-    let render = |mesh: &Mesh| {
-        renderer
-            .render_model(&model, mesh, &scene, &options)
-            .unwrap()
-            .image
+    // The sphere with its turned edges cut, and with hard edges.
+    let render = |model: &MaterialModel| {
+        let image = |mesh: &Mesh| {
+            renderer
+                .render_model(model, mesh, &scene, &options)
+                .unwrap()
+                .image
+        };
+        (image(&blended), image(&hard))
     };
-    let (cut, edges) = (render(&blended), render(&hard));
+    let (cut, edges) = render(&model);
     let (e_cut, e_edges) = detail_energies(&cut, &edges);
     eprintln!(
         "fine contrast: blended {e_cut:.6}, hard edges {e_edges:.6}, ratio {:.3}",
@@ -590,14 +594,7 @@ fn turned_face_edges_cut_the_texture_instead_of_overlaying_two_layouts() {
     // it; ranked by luminance the brighter texture won and the sphere was 1.016 of it).
     let mut parts = golden_model().into_parts();
     parts.range_map = None;
-    let flat = MaterialModel::new(parts).unwrap();
-    let render = |mesh: &Mesh| {
-        renderer
-            .render_model(&flat, mesh, &scene, &options)
-            .unwrap()
-            .image
-    };
-    let (cut, edges) = (render(&blended), render(&hard));
+    let (cut, edges) = render(&MaterialModel::new(parts).unwrap());
     let lit_mean = |image: &Array3<f32>| {
         let l = luminance(image);
         let lit: Vec<f32> = l.iter().copied().filter(|&v| v > 0.0).collect();
