@@ -108,16 +108,22 @@ fn the_viewer_renders_frames_and_saves_a_screenshot_under_xvfb() {
     assert!(distinct.len() > 100, "{} distinct colours", distinct.len());
 }
 
-#[test]
-fn the_viewer_without_a_display_fails_cleanly() {
-    let model = common::repo().join("tests/golden/sponge64.btfm");
-    let out = Command::new(env!("CARGO_BIN_EXE_btfmrf"))
-        .args(["view", model.to_str().unwrap(), "--frames", "1"])
+/// `btfmrf view ARGS` with no display at all (X11 and Wayland variables removed).
+fn view_without_display(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_btfmrf"))
+        .arg("view")
+        .args(args)
         .env_remove("DISPLAY")
         .env_remove("WAYLAND_DISPLAY")
         .env_remove("WAYLAND_SOCKET")
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+#[test]
+fn the_viewer_without_a_display_fails_cleanly() {
+    let model = common::repo().join("tests/golden/sponge64.btfm");
+    let out = view_without_display(&[model.to_str().unwrap(), "--frames", "1"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(!stderr.contains("panicked"), "{stderr}");
@@ -128,14 +134,13 @@ fn the_viewer_without_a_display_fails_cleanly() {
 fn the_viewer_over_the_memory_budget_is_refused_before_any_window() {
     // The ready stones finish every frontal light's pair (81) beside their 20 clusters.
     let model = common::repo().join("models/stones.btfm");
-    let out = Command::new(env!("CARGO_BIN_EXE_btfmrf"))
-        .args(["view", model.to_str().unwrap(), "--tile", "2048"])
-        .args(["--memory-limit", "1G"])
-        .env_remove("DISPLAY")
-        .env_remove("WAYLAND_DISPLAY")
-        .env_remove("WAYLAND_SOCKET")
-        .output()
-        .unwrap();
+    let out = view_without_display(&[
+        model.to_str().unwrap(),
+        "--tile",
+        "2048",
+        "--memory-limit",
+        "1G",
+    ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("view with a 2048^2 tile"), "{stderr}");
